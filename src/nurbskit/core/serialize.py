@@ -1,0 +1,161 @@
+"""The nurbskit JSON format and adapters to geomdl objects.
+
+nurbskit JSON (version 1)::
+
+    {"format": "nurbskit", "version": 1, "kind": "curve" | "surface" | "volume",
+     "degrees": [p, ...], "knot_vectors": [[...], ...],
+     "control_points": nested lists shaped (n_1, ..., n_k, dim),
+     "weights": nested lists shaped (n_1, ..., n_k)}
+
+geomdl orders control points differently, and these adapters are the one place that
+knows it: surfaces are flattened with v fastest (index ``iu * n_v + iv``); volumes
+with w outermost, then u, then v (index ``iw * n_u * n_v + iu * n_v + iv``). geomdl
+speaks of order (degree + 1) in places; these adapters speak degrees.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .._fs import atomic_open
+from ..errors import InputError, NurbskitError
+from .curve import NURBSCurve
+from .spline import TensorSpline
+from .surface import NURBSSurface
+from .volume import NURBSVolume
+
+FORMAT = "nurbskit"
+VERSION = 1
+KINDS = {"curve": NURBSCurve, "surface": NURBSSurface, "volume": NURBSVolume}
+
+
+def to_dict(obj: TensorSpline) -> dict:
+    """The nurbskit JSON structure of a curve, surface or volume (float64 values)."""
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "kind": obj.kind,
+        "degrees": list(obj.degrees),
+        "knot_vectors": [kv.detach().cpu().double().tolist() for kv in obj.knot_vectors],
+        "control_points": obj.control_points.detach().cpu().double().tolist(),
+        "weights": obj.weights.detach().cpu().double().tolist(),
+    }
+
+
+def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, source: str = "data") -> TensorSpline:
+    """Build a spline from the nurbskit JSON structure (validated)."""
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise InputError(f"{source}: expected a nurbskit JSON object with \"format\": \"nurbskit\"")
+    if data.get("version") != VERSION:
+        raise InputError(f"{source}: nurbskit format version {data.get('version')!r} is not supported (expected {VERSION})")
+    kind = data.get("kind")
+    if kind not in KINDS:
+        raise InputError(f"{source}: kind must be one of {sorted(KINDS)}, got {kind!r}")
+    try:
+        cp = torch.as_tensor(np.asarray(data["control_points"], dtype=np.float64), dtype=dtype, device=device)
+        w = data.get("weights")
+        w = None if w is None else torch.as_tensor(np.asarray(w, dtype=np.float64), dtype=dtype, device=device)
+        kvs = [torch.as_tensor(np.asarray(k, dtype=np.float64), dtype=dtype, device=device) for k in data["knot_vectors"]]
+        degrees = [int(d) for d in data["degrees"]]
+    except KeyError as exc:
+        raise InputError(f"{source}: missing field {exc.args[0]!r}") from None
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{source}: malformed field ({exc})") from None
+    cls = KINDS[kind]
+    try:
+        if kind == "curve":
+            if len(degrees) != 1 or len(kvs) != 1:
+                raise NurbskitError("a curve has one degree and one knot vector")
+            return cls(cp, degrees[0], kvs[0], w)
+        return cls(cp, degrees, kvs, w)
+    except NurbskitError as exc:
+        raise InputError(f"{source}: {exc}") from None
+
+
+def save(obj: TensorSpline, path: str | os.PathLike) -> None:
+    """Write ``obj`` as nurbskit JSON, atomically."""
+    with atomic_open(path, "w") as handle:
+        json.dump(to_dict(obj), handle)
+
+
+def load(path: str | os.PathLike, *, dtype: torch.dtype = torch.float64, device=None) -> TensorSpline:
+    """Read a nurbskit JSON file (``nurbskit.io`` reads the other NURBS formats)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, expected a nurbskit JSON file") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    return from_dict(data, dtype=dtype, device=device, source=str(path))
+
+
+# ---- geomdl -------------------------------------------------------------------------
+
+def _geomdl():
+    try:
+        from geomdl import NURBS
+    except ImportError:  # pragma: no cover
+        raise NurbskitError("geomdl is needed for this conversion: pip install geomdl") from None
+    return NURBS
+
+
+def to_geomdl(obj: TensorSpline):
+    """A geomdl ``NURBS.Curve`` / ``NURBS.Surface`` / ``NURBS.Volume`` equal to ``obj``."""
+    NURBS = _geomdl()
+    cp = obj.control_points.detach().cpu().double().numpy()
+    w = obj.weights.detach().cpu().double().numpy()
+    kvs = [kv.detach().cpu().double().tolist() for kv in obj.knot_vectors]
+    if obj.kind == "volume":  # w outermost, then u, then v
+        cp = cp.transpose(2, 0, 1, 3)
+        w = w.transpose(2, 0, 1)
+    cpw = np.concatenate([cp * w[..., None], w[..., None]], axis=-1).reshape(-1, cp.shape[-1] + 1).tolist()
+    if obj.kind == "curve":
+        g = NURBS.Curve()
+        g.degree = obj.degrees[0]
+        g.ctrlptsw = cpw
+        g.knotvector = kvs[0]
+    elif obj.kind == "surface":
+        g = NURBS.Surface()
+        g.degree_u, g.degree_v = obj.degrees
+        g.set_ctrlpts(cpw, *obj.sizes)
+        g.knotvector_u, g.knotvector_v = kvs
+    else:
+        g = NURBS.Volume()
+        g.degree_u, g.degree_v, g.degree_w = obj.degrees
+        g.set_ctrlpts(cpw, *obj.sizes)
+        g.knotvector_u, g.knotvector_v, g.knotvector_w = kvs
+    return g
+
+
+def from_geomdl(g, *, dtype: torch.dtype = torch.float64, device=None) -> TensorSpline:
+    """A nurbskit object equal to a geomdl curve, surface or volume (B-spline or NURBS)."""
+    cpw = np.asarray(g.ctrlptsw if hasattr(g, "ctrlptsw") else [list(p) + [1.0] for p in g.ctrlpts], dtype=np.float64)
+    w = cpw[:, -1]
+    cp = cpw[:, :-1] / w[:, None]
+    dim = cp.shape[-1]
+    as_t = lambda a: torch.as_tensor(a, dtype=dtype, device=device)  # noqa: E731
+    if g.pdimension == 1:
+        return NURBSCurve(as_t(cp), g.degree, as_t(g.knotvector), as_t(w))
+    if g.pdimension == 2:
+        nu, nv = g.ctrlpts_size_u, g.ctrlpts_size_v
+        return NURBSSurface(
+            as_t(cp.reshape(nu, nv, dim)), (g.degree_u, g.degree_v),
+            [as_t(g.knotvector_u), as_t(g.knotvector_v)], as_t(w.reshape(nu, nv)),
+        )
+    nu, nv, nw = g.ctrlpts_size_u, g.ctrlpts_size_v, g.ctrlpts_size_w
+    cp = cp.reshape(nw, nu, nv, dim).transpose(1, 2, 0, 3)
+    w = w.reshape(nw, nu, nv).transpose(1, 2, 0)
+    return NURBSVolume(
+        as_t(np.ascontiguousarray(cp)), (g.degree_u, g.degree_v, g.degree_w),
+        [as_t(g.knotvector_u), as_t(g.knotvector_v), as_t(g.knotvector_w)], as_t(np.ascontiguousarray(w)),
+    )

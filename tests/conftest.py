@@ -1,0 +1,46 @@
+"""Shared test fixtures.
+
+Real data lives in ``../shared/data`` beside the repository (never copied into it).
+Tests that need it use the ``shared_data`` fixture: they skip with a reason when the
+folder is absent, and fail when ``NURBSKIT_REQUIRE_SHARED_DATA=1`` (set by .ci/run
+whenever the folder exists) so that CI cannot pass by skipping them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("NURBSKIT_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
+
+
+def _require() -> bool:
+    return os.environ.get("NURBSKIT_REQUIRE_SHARED_DATA", "") not in ("", "0")
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Path of ../shared/data; skip without it (fail when it is required)."""
+    if not SHARED_DATA.is_dir():
+        if _require():
+            pytest.fail(f"NURBSKIT_REQUIRE_SHARED_DATA is set but {SHARED_DATA} is missing")
+        pytest.skip(f"{SHARED_DATA} not present")
+    return SHARED_DATA
+
+
+def shared_file(shared_data: Path, relative: str) -> Path:
+    """A file under ../shared/data that must exist when the folder does."""
+    path = shared_data / relative
+    if not path.exists():
+        pytest.fail(f"expected data file {path} is missing from ../shared/data")
+    return path
+
+
+@pytest.fixture(autouse=True)
+def _deterministic_torch():
+    torch.set_default_dtype(torch.float32)
+    yield
