@@ -221,7 +221,7 @@ def hausdorff_distance_naive(x: Tensor, y: Tensor, squared: bool = False) -> Ten
         tensor(5.)
     """
     best = 0.0
-    for a, b in ((x, y), (y, x)):
+    for a, b in ((x.detach(), y.detach()), (y.detach(), x.detach())):
         for i in range(a.shape[0]):
             nearest = min(float(((a[i] - b[j]) ** 2).sum()) for j in range(b.shape[0]))
             best = max(best, nearest)
