@@ -13,6 +13,8 @@ On CPU no ``N x M`` matrix is ever built: memory is ``O((N + M) * D)``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
@@ -114,8 +116,9 @@ def nearest_neighbors(
     batch = query.shape[:-2]
     n, d = query.shape[-2], query.shape[-1]
     m = reference.shape[-2]
-    qf = query.detach().reshape(-1, n, d)
-    rf = reference.detach().reshape(-1, m, d)
+    b = math.prod(batch)
+    qf = query.detach().reshape(b, n, d)
+    rf = reference.detach().reshape(b, m, d)
     indices = []
     for qb, rb in zip(qf, rf):
         if n == 0:
