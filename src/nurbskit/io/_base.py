@@ -1,0 +1,406 @@
+"""What every reader and writer shares: the result types, file checks, content sniffing,
+size checks before allocating, and the fast text block parser.
+
+Convention: readers return float64 coordinates, int64 faces, uint8 colours ``(N, 3|4)``
+and int64 labels; every error is an :class:`~nurbskit.errors.InputError` whose message
+starts with the file name and says what was expected and what arrived.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, OptionError
+
+
+@dataclass
+class PointCloud:
+    """Points read from a file.
+
+    Attributes:
+        points: ``(N, 3)`` float64.
+        normals: ``(N, 3)`` float64 or None.
+        colors: ``(N, 3)`` or ``(N, 4)`` uint8 (RGB[A], 0..255) or None.
+        labels: ``(N,)`` int64 or None (a segment / class id per point).
+        dropped: number of points dropped because a coordinate was NaN (PCD holes).
+        source: the path read, or None.
+
+    Example:
+        >>> import numpy as np
+        >>> PointCloud(np.zeros((2, 3))).num_points
+        2
+    """
+
+    points: np.ndarray
+    normals: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    labels: np.ndarray | None = None
+    dropped: int = 0
+    source: Path | None = None
+
+    @property
+    def num_points(self) -> int:
+        return int(self.points.shape[0])
+
+    def __len__(self) -> int:
+        return self.num_points
+
+    @property
+    def attributes(self) -> list[str]:
+        """Names of the optional attributes present: subset of normals, colors, labels."""
+        return [n for n in ("normals", "colors", "labels") if getattr(self, n) is not None]
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh read from a file.
+
+    Attributes:
+        vertices: ``(V, 3)`` float64.
+        faces: ``(F, 3)`` int64, indices into ``vertices`` (polygons fan-triangulated).
+        normals: ``(V, 3)`` float64 per-vertex normals, or None.
+        colors: ``(V, 3|4)`` uint8 per-vertex colours, or None.
+        source: the path read, or None.
+
+    Example:
+        >>> import numpy as np
+        >>> Mesh(np.eye(3), np.array([[0, 1, 2]])).num_faces
+        1
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    source: Path | None = None
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def num_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+
+@dataclass
+class Payload:
+    """What a format reader hands to the dispatchers (internal)."""
+
+    points: np.ndarray
+    faces: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    labels: np.ndarray | None = None
+    dropped: int = 0
+    info: dict = field(default_factory=dict)
+
+
+# ---- file checks --------------------------------------------------------------------
+
+def check_readable(path: str | os.PathLike) -> Path:
+    """The path as a Path, or an InputError for a missing file, a directory, an empty file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, expected a file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty")
+    return path
+
+
+def read_bytes(path: Path) -> bytes:
+    """The whole file, after checking that it fits in memory."""
+    check_fits(path, path.stat().st_size, "the file")
+    try:
+        return path.read_bytes()
+    except MemoryError:
+        raise InputError(f"{path}: the file ({_human(path.stat().st_size)}) does not fit in memory") from None
+
+
+def available_memory() -> int:
+    """Bytes of memory the OS says can still be allocated (MemAvailable; a large number if unknown)."""
+    try:
+        with open("/proc/meminfo", "rb") as handle:
+            for line in handle:
+                if line.startswith(b"MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # not Linux
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62
+
+
+def _human(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB"):
+        if n < 1024 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TB"  # pragma: no cover
+
+
+def check_fits(path: Path, nbytes: int, what: str) -> None:
+    """Refuse to allocate ``nbytes`` when the machine does not have them (checked before allocating)."""
+    avail = available_memory()
+    if nbytes > avail:
+        raise InputError(
+            f"{path}: {what} needs about {_human(nbytes)} of memory but only {_human(avail)} is available"
+        )
+
+
+def check_declared(path: Path, count: int, item_bytes: float, available_bytes: int, what: str) -> None:
+    """Compare a count from a header with the data that follows it.
+
+    ``item_bytes`` is the least number of bytes one item can take (exact for binary data,
+    a lower bound for text); a header claiming more than the file can hold is refused
+    before anything is allocated.
+    """
+    if count < 0:
+        raise InputError(f"{path}: header declares a negative number of {what} ({count})")
+    need = count * item_bytes
+    if need > available_bytes:
+        raise InputError(
+            f"{path}: header declares {count:,} {what} ({_human(need)}) but only "
+            f"{_human(available_bytes)} of data follow; the file is truncated or the header is wrong"
+        )
+
+
+# ---- sniffing -----------------------------------------------------------------------
+
+_OFF_KEYWORD = re.compile(rb"^\s*(ST)?(C)?(N)?(4)?(n)?OFF\b")
+
+
+def sniff(path: Path) -> str | None:
+    """Format name from the first bytes of the file, or None when the content says nothing.
+
+    Recognises ply, off, pcd, npy, npz, json, stl (ascii by ``solid`` + ``facet``, binary by
+    its exact size), so a file whose extension lies is still read as what it is.
+    """
+    with open(path, "rb") as handle:
+        head = handle.read(4096)
+    size = path.stat().st_size
+    if head.startswith(b"ply") and head[3:4] in (b"\n", b"\r"):
+        return "ply"
+    if head.startswith(b"\x93NUMPY"):
+        return "npy"
+    if head.startswith(b"PK\x03\x04"):
+        return "npz"
+    stripped = head.lstrip()
+    if _OFF_KEYWORD.match(head):
+        return "off"
+    if re.match(rb"^(#[^\n]*\n\s*)*(VERSION|FIELDS)\s", stripped) and b"FIELDS" in head and b"DATA" in head:
+        return "pcd"
+    if stripped.startswith(b"{"):
+        return "json"
+    if stripped[:5].lower() == b"solid" and b"facet" in head:
+        return "stl"
+    if size >= 84:
+        n = int(np.frombuffer(head[80:84], "<u4")[0]) if len(head) >= 84 else -1
+        if n >= 0 and size == 84 + 50 * n:
+            return "stl"
+    return None
+
+
+# ---- text --------------------------------------------------------------------------
+
+_COMMENT = re.compile(rb"(#|//)[^\n]*")
+_BLANK = re.compile(rb"\n[ \t\r]*(?=\n)")
+
+
+def clean_text(body: bytes, comments: bool = True) -> bytes:
+    """Text with comments removed, CRLF turned into LF, blank lines removed, ending in LF.
+
+    After this, every line holds data, so counting newlines counts records.
+    """
+    if b"\r" in body:
+        body = body.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    if comments and (b"#" in body or b"//" in body):
+        body = _COMMENT.sub(b"", body)
+    body = b"\n" + body
+    if b"\n\n" in body or re.search(rb"\n[ \t]+\n", body):
+        body = _BLANK.sub(b"", body)
+    body = body[1:]
+    if body.startswith(b"\n"):
+        body = body[1:]
+    if body and not body.endswith(b"\n"):
+        body += b"\n"
+    if body.strip() == b"":
+        return b""
+    return body
+
+
+class Lines:
+    """Random access to the lines of cleaned text by index, without splitting it into a list."""
+
+    def __init__(self, body: bytes):
+        self.body = body
+        ends = np.flatnonzero(np.frombuffer(body, np.uint8) == 10)
+        self.ends = ends
+        self.count = int(ends.size)
+
+    def start(self, i: int) -> int:
+        return 0 if i == 0 else int(self.ends[i - 1]) + 1
+
+    def block(self, i: int, n: int) -> bytes:
+        """Lines ``i .. i + n - 1`` as one bytes object (each ends with LF)."""
+        if n <= 0:
+            return b""
+        return self.body[self.start(i): int(self.ends[i + n - 1]) + 1]
+
+    def line(self, i: int) -> bytes:
+        return self.body[self.start(i): int(self.ends[i])]
+
+
+def parse_table(path: Path, block: bytes, rows: int | None, what: str, first_line: int = 1,
+                delimiter: str | None = None, dtype=np.float64) -> np.ndarray:
+    """Parse a block of numeric text lines into a ``(rows, cols)`` array (numpy's C parser).
+
+    Raises an InputError naming the file, the line and the text when a line is not numbers
+    or the rows differ in length.
+    """
+    if not block.strip():
+        return np.zeros((0, 0), dtype)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            table = np.loadtxt(io.BytesIO(block), dtype=dtype, ndmin=2, comments=None, delimiter=delimiter)
+    except ValueError as exc:
+        msg = str(exc)
+        m = re.search(r"row (\d+)", msg) or re.search(r"line (\d+)", msg)
+        lineno = f" at line {first_line + int(m.group(1)) - 1}" if m else ""
+        detail = msg.splitlines()[0]
+        raise InputError(f"{path}: {what}: not a table of numbers{lineno} ({detail})") from None
+    except MemoryError:
+        raise InputError(f"{path}: {what} do not fit in memory") from None
+    if rows is not None and table.shape[0] != rows:
+        raise InputError(f"{path}: expected {rows:,} {what}, found {table.shape[0]:,}")
+    return table
+
+
+def check_finite(path: Path, array: np.ndarray, what: str) -> None:
+    """InputError naming the first row with a NaN or infinite value."""
+    bad = ~np.isfinite(array)
+    if bad.any():
+        row = int(np.flatnonzero(bad.reshape(array.shape[0], -1).any(axis=1))[0])
+        raise InputError(
+            f"{path}: {what} contain NaN or infinite values (first at {what.rstrip('s')} {row}: "
+            f"{array[row].tolist()})"
+        )
+
+
+def colors_to_uint8(values: np.ndarray) -> np.ndarray:
+    """Colours as uint8: integer types clipped to 0..255, floats in [0, 1] scaled by 255."""
+    values = np.asarray(values)
+    if values.dtype.kind == "f":
+        if values.size and np.nanmax(values) <= 1.0:
+            values = values * 255.0
+        return np.clip(np.rint(values), 0, 255).astype(np.uint8)
+    return np.clip(values, 0, 255).astype(np.uint8)
+
+
+def as_points(points, what: str = "points") -> np.ndarray:
+    """Validate an ``(N, 3)`` array given to a writer; returns float64 contiguous."""
+    try:
+        import torch
+
+        if isinstance(points, torch.Tensor):
+            points = points.detach().cpu().numpy()
+    except ImportError:  # pragma: no cover
+        pass
+    arr = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise OptionError(f"{what} must have shape (N, 3), got {arr.shape}")
+    return arr
+
+
+def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype) -> np.ndarray | None:
+    """Validate an optional per-point attribute for a writer (None passes through)."""
+    if values is None:
+        return None
+    try:
+        import torch
+
+        if isinstance(values, torch.Tensor):
+            values = values.detach().cpu().numpy()
+    except ImportError:  # pragma: no cover
+        pass
+    arr = np.asarray(values)
+    if cols is None:
+        if arr.shape != (n,):
+            raise OptionError(f"{what} must have shape ({n},) to match the points, got {arr.shape}")
+    elif arr.ndim != 2 or arr.shape[0] != n or arr.shape[1] not in cols:
+        want = " or ".join(f"({n}, {c})" for c in cols)
+        raise OptionError(f"{what} must have shape {want} to match the points, got {arr.shape}")
+    if dtype is np.uint8:
+        return np.ascontiguousarray(colors_to_uint8(arr))
+    if dtype is np.int64 and arr.dtype.kind == "f":
+        if not np.all(np.isfinite(arr)) or np.any(arr != np.rint(arr)):
+            raise OptionError(f"{what} must be integers")
+    return np.ascontiguousarray(arr.astype(dtype))
+
+
+def as_faces(faces, num_vertices: int) -> np.ndarray:
+    """Validate ``(F, 3)`` triangle indices for a writer."""
+    try:
+        import torch
+
+        if isinstance(faces, torch.Tensor):
+            faces = faces.detach().cpu().numpy()
+    except ImportError:  # pragma: no cover
+        pass
+    arr = np.asarray(faces)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise OptionError(f"faces must have shape (F, 3), got {arr.shape}")
+    if arr.size and arr.dtype.kind not in "iu":
+        raise OptionError(f"faces must be integer indices, got dtype {arr.dtype}")
+    arr = arr.astype(np.int64)
+    if arr.size and (arr.min() < 0 or arr.max() >= num_vertices):
+        raise OptionError(
+            f"faces index vertices {int(arr.min())}..{int(arr.max())}, but there are {num_vertices} vertices"
+        )
+    return np.ascontiguousarray(arr)
+
+
+def check_faces(path: Path, faces: np.ndarray, num_vertices: int) -> None:
+    """InputError when a face index points outside the vertex list."""
+    if faces.size == 0:
+        return
+    lo, hi = int(faces.min()), int(faces.max())
+    if lo < 0 or hi >= num_vertices:
+        bad = lo if lo < 0 else hi
+        raise InputError(f"{path}: a face refers to vertex {bad}, but the file has {num_vertices} vertices")
+
+
+def fan_triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Triangles ``(T, 3)`` from polygons given as per-polygon sizes and their concatenated indices.
+
+    A polygon ``(a, b, c, d, ...)`` becomes ``(a, b, c), (a, c, d), ...`` (a fan from its first
+    corner). Polygons with fewer than 3 corners give no triangle.
+
+    Example:
+        >>> fan_triangulate(np.array([4]), np.array([0, 1, 2, 3])).tolist()
+        [[0, 1, 2], [0, 2, 3]]
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    ntri = np.clip(counts - 2, 0, None)
+    first = np.repeat(offsets, ntri)
+    # position of each triangle within its polygon: 0, 1, ..., ntri-1
+    within = np.arange(int(ntri.sum()), dtype=np.int64) - np.repeat(np.cumsum(ntri) - ntri, ntri)
+    tri = np.stack([indices[first], indices[first + within + 1], indices[first + within + 2]], axis=1)
+    return tri.astype(np.int64)
+
+
+def write_note(attrs: list[str], fmt: str) -> list[str]:
+    """The names of attributes a format cannot store (returned by the writers)."""
+    return list(attrs)

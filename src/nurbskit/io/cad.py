@@ -1,0 +1,124 @@
+"""Rhino ``.3dm`` files through rhino3dm (optional extra ``nurbskit[cad]``): NURBS curves and
+surfaces, read and written.
+
+openNURBS differs from The NURBS Book in two ways, handled here: its knot vectors
+omit the first and last knot (``n + p - 1`` knots, not ``n + p + 1``), and its
+``Point4d`` control points are homogeneous (``x*w, y*w, z*w, w``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .._fs import atomic_path
+from .._optional import require
+from ..core.curve import NURBSCurve
+from ..core.spline import TensorSpline
+from ..core.surface import NURBSSurface
+from ..errors import OptionError
+from ._base import InputError
+
+
+def _rhino():
+    return require("rhino3dm", "cad", "reading and writing .3dm files")
+
+
+def _full_knots(knots) -> np.ndarray:
+    k = np.array([knots[i] for i in range(len(knots))], dtype=np.float64)
+    return np.concatenate([[k[0]], k, [k[-1]]])
+
+
+def _geometry_of(obj):
+    geo = obj.Geometry
+    rh = _rhino()
+    if isinstance(geo, rh.NurbsCurve) or isinstance(geo, rh.NurbsSurface):
+        return geo
+    if isinstance(geo, rh.Curve):
+        return geo.ToNurbsCurve()
+    if isinstance(geo, rh.Surface):
+        return geo.ToNurbsSurface()
+    if isinstance(geo, rh.Brep) and len(geo.Faces) == 1:
+        return geo.Faces[0].ToNurbsSurface()
+    return None
+
+
+def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
+    """The ``index``-th NURBS curve or surface of a ``.3dm`` file (other objects are skipped)."""
+    rh = _rhino()
+    path = Path(path)
+    model = rh.File3dm.Read(str(path))
+    if model is None:
+        raise InputError(f"{path}: rhino3dm could not read it as a .3dm file")
+    found = [g for g in (_geometry_of(o) for o in model.Objects) if g is not None]
+    if not found:
+        raise InputError(f"{path}: holds no NURBS curve or surface")
+    if not -len(found) <= index < len(found):
+        raise OptionError(f"{path}: index {index} is out of range; the file holds {len(found)} curves/surfaces")
+    geo = found[index]
+    t = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
+    if isinstance(geo, rh.NurbsCurve):
+        n = len(geo.Points)
+        cpw = np.array([[geo.Points[i].X, geo.Points[i].Y, geo.Points[i].Z, geo.Points[i].W] for i in range(n)])
+        w = cpw[:, 3] if geo.IsRational else np.ones(n)
+        cp = cpw[:, :3] / w[:, None] if geo.IsRational else cpw[:, :3]
+        return NURBSCurve(t(cp), geo.Degree, t(_full_knots(geo.Knots)), t(w))
+    nu, nv = geo.Points.CountU, geo.Points.CountV
+    cpw = np.zeros((nu, nv, 4))
+    for i in range(nu):
+        for j in range(nv):
+            p = geo.Points.GetPoint(i, j) if not geo.IsRational else geo.Points.GetControlPoint(i, j)
+            if geo.IsRational:
+                cpw[i, j] = (p.X, p.Y, p.Z, p.W)
+            else:
+                cpw[i, j] = (p.X, p.Y, p.Z, 1.0)
+    w = cpw[..., 3]
+    cp = cpw[..., :3] / w[..., None] if geo.IsRational else cpw[..., :3]
+    return NURBSSurface(t(cp), (geo.OrderU - 1, geo.OrderV - 1),
+                        [t(_full_knots(geo.KnotsU)), t(_full_knots(geo.KnotsV))], t(w))
+
+
+def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
+    """Write one curve or surface (in 2-D or 3-D) to a ``.3dm`` file, atomically."""
+    rh = _rhino()
+    path = Path(path)
+    if obj.kind not in ("curve", "surface"):
+        raise OptionError(f"{path}: .3dm holds curves and surfaces; got a {obj.kind}")
+    if obj.dim not in (2, 3):
+        raise OptionError(f"{path}: .3dm control points are 2-D or 3-D; got {obj.dim}-D")
+    cp = obj.control_points.detach().cpu().double().numpy()
+    if obj.dim == 2:
+        cp = np.concatenate([cp, np.zeros(cp.shape[:-1] + (1,))], axis=-1)
+    w = obj.weights.detach().cpu().double().numpy()
+    kvs = [kv.detach().cpu().double().numpy() for kv in obj.knot_vectors]
+    rational = bool(obj.is_rational) or not np.allclose(w, 1.0)
+    model = rh.File3dm()
+    if obj.kind == "curve":
+        n, p = obj.sizes[0], obj.degrees[0]
+        geo = rh.NurbsCurve(3, rational, p + 1, n)
+        for i in range(n):
+            x, y, z = cp[i] * w[i]
+            geo.Points[i] = rh.Point4d(x, y, z, w[i]) if rational else rh.Point4d(*cp[i], 1.0)
+        for i, k in enumerate(kvs[0][1:-1]):
+            geo.Knots[i] = float(k)
+        model.Objects.AddCurve(geo)
+    else:
+        (nu, nv), (p, q) = obj.sizes, obj.degrees
+        geo = rh.NurbsSurface.Create(3, rational, p + 1, q + 1, nu, nv)
+        for i in range(nu):
+            for j in range(nv):
+                x, y, z = cp[i, j] * w[i, j] if rational else cp[i, j]
+                geo.Points[(i, j)] = rh.Point4d(x, y, z, w[i, j] if rational else 1.0)
+        for i, k in enumerate(kvs[0][1:-1]):
+            geo.KnotsU[i] = float(k)
+        for i, k in enumerate(kvs[1][1:-1]):
+            geo.KnotsV[i] = float(k)
+        model.Objects.AddSurface(geo)
+    if not geo.IsValid:
+        raise OptionError(f"{path}: rhino3dm rejects this {obj.kind} as invalid (check knots and weights)")
+    with atomic_path(path) as tmp:
+        if not model.Write(str(tmp), 7):
+            raise OSError(f"rhino3dm could not write {path}")
