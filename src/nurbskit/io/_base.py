@@ -276,8 +276,9 @@ def parse_table(path: Path, block: bytes, rows: int | None, what: str, first_lin
             table = np.loadtxt(io.BytesIO(block), dtype=dtype, ndmin=2, comments=None, delimiter=delimiter)
     except ValueError as exc:
         msg = str(exc)
-        m = re.search(r"row (\d+)", msg) or re.search(r"line (\d+)", msg)
-        lineno = f" at line {first_line + int(m.group(1)) - 1}" if m else ""
+        # numpy counts rows from 0; comment and blank lines were removed, so say "data line"
+        m = re.search(r"row (\d+)", msg)
+        lineno = f" at data line {first_line + int(m.group(1))}" if m else ""
         detail = msg.splitlines()[0]
         raise InputError(f"{path}: {what}: not a table of numbers{lineno} ({detail})") from None
     except MemoryError:
@@ -400,7 +401,3 @@ def fan_triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
     tri = np.stack([indices[first], indices[first + within + 1], indices[first + within + 2]], axis=1)
     return tri.astype(np.int64)
 
-
-def write_note(attrs: list[str], fmt: str) -> list[str]:
-    """The names of attributes a format cannot store (returned by the writers)."""
-    return list(attrs)

@@ -130,7 +130,7 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
             from .cad import read_3dm
 
             obj = read_3dm(path, index=index)
-    except InputError:
+    except (InputError, OptionError):
         raise
     except NurbskitError as exc:  # construction found the parameters inconsistent
         raise InputError(f"{path}: {exc}") from None

@@ -1,0 +1,253 @@
+"""``nurbskit info``, ``nurbskit convert`` and ``nurbskit sample``: files in and out.
+
+Examples::
+
+    nurbskit info scan.pcd --json
+    nurbskit convert bunny.obj bunny.ply
+    nurbskit convert duck1.ctrlpts duck1.json --sizes 14 13 --degrees 3 3
+    nurbskit sample bunny.obj -n 100000 --method poisson --seed 0 -o bunny_100k.ply
+
+Every output is written atomically (temporary file, then rename), so converting a
+file onto itself or pressing Ctrl-C never leaves a damaged or half-written file.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, NurbskitError, OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("info", help="describe a point, mesh or NURBS file",
+                              description="Kind, counts, bounding box and attributes of a point, mesh or NURBS file.")
+    p.add_argument("file", help="the file to describe")
+    p.add_argument("--json", action="store_true", help="print JSON (kind, num_points, num_faces, bbox, attributes, ...)")
+    _nurbs_options(p)
+    p.set_defaults(run=run_info)
+
+    p = subparsers.add_parser("convert", help="convert points, meshes or NURBS files by extension",
+                              description="Read IN and write OUT in the format of OUT's extension. "
+                                          "Points: .ply .pcd .xyz .txt .csv .xyzc .pts .npy .npz .off .obj; "
+                                          "meshes: .ply .off .obj .stl .npz; NURBS: .json .ctrlpts .cptw .smesh .dat .3dm.")
+    p.add_argument("input", metavar="IN", help="file to read")
+    p.add_argument("output", metavar="OUT", help="file to write (its extension picks the format)")
+    p.add_argument("--ascii", action="store_true", help="write text PLY / STL / PCD instead of binary")
+    p.add_argument("--pcd-data", choices=("binary", "ascii", "binary_compressed"), default=None,
+                   help="PCD data section (default binary)")
+    p.add_argument("--geomdl", action="store_true", help="write geomdl's JSON instead of nurbskit JSON for .json")
+    _nurbs_options(p)
+    p.set_defaults(run=run_convert)
+
+    p = subparsers.add_parser("sample", help="sample points on a mesh (Poisson-disk or uniform)",
+                              description="Sample N points on a triangle mesh and write them as a point file.")
+    p.add_argument("mesh", metavar="MESH", help="triangle mesh to sample")
+    p.add_argument("-n", type=int, required=True, help="number of points")
+    p.add_argument("--method", choices=("poisson", "uniform"), default="poisson",
+                   help="poisson: blue noise, well spread (default); uniform: independent, area-weighted")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: fresh entropy)")
+    p.add_argument("-o", "--output", required=True, help="point file to write (.ply, .xyz, .pcd, .npy, ...)")
+    p.add_argument("--no-normals", action="store_true", help="do not write the face normal of each sample")
+    p.set_defaults(run=run_sample)
+
+
+def _nurbs_options(p) -> None:
+    g = p.add_argument_group("control-point files (.ctrlpts, .cptw)")
+    g.add_argument("--sizes", type=int, nargs="+", help="control points per direction, e.g. 14 13")
+    g.add_argument("--degrees", type=int, nargs="+", help="degree per direction, e.g. 3 3")
+    g.add_argument("--weights", help="a .weights file (default: the one beside the .ctrlpts file, if any)")
+    g.add_argument("--meta", help="side JSON with sizes, degrees, knot_vectors (default: FILE.json if present)")
+
+
+def _nurbs_kwargs(args) -> dict:
+    out = {}
+    for key in ("sizes", "degrees", "weights", "meta"):
+        value = getattr(args, key, None)
+        if value is not None:
+            out[key] = value
+    return out
+
+
+def _progress(total: int, desc: str):
+    from tqdm import tqdm
+
+    # tqdm hides itself when stderr is not a terminal (disable=None)
+    return tqdm(total=total, desc=desc, unit="step", disable=None, file=sys.stderr, leave=False)
+
+
+# ---- info ---------------------------------------------------------------------------
+
+def describe(path: str | Path, **nurbs_options) -> dict:
+    """What ``nurbskit info`` reports about a file, as a dict.
+
+    Keys: ``file``, ``format``, ``kind`` ('points', 'mesh', 'curve', 'surface', 'volume'),
+    ``num_points``, ``num_faces`` (meshes), ``bbox`` ([[min x, y, z], [max x, y, z]]),
+    ``attributes``; NURBS files add ``sizes``, ``degrees``, ``rational``, ``domain``.
+    """
+    from ..io import formats
+    from ..io.nurbs import is_nurbs_file, nurbs_format, read_nurbs
+
+    path = Path(path)
+    formats.check_readable(path)
+    if is_nurbs_file(path):
+        fmt = nurbs_format(path)
+        obj = read_nurbs(path, **nurbs_options)
+        cp = obj.control_points.detach().cpu().double().numpy().reshape(-1, obj.dim)
+        return {
+            "file": str(path), "format": fmt if fmt != "json" else "json", "kind": obj.kind,
+            "num_points": int(cp.shape[0]), "sizes": list(obj.sizes), "degrees": list(obj.degrees),
+            "dim": obj.dim, "rational": bool(obj.is_rational),
+            "domain": [list(d) for d in obj.domain],
+            "bbox": [cp.min(axis=0).tolist(), cp.max(axis=0).tolist()],
+            "attributes": ["weights"] if obj.is_rational else [],
+        }
+    payload = formats.read_payload(path)
+    pts = payload.points
+    finite = np.isfinite(pts).all(axis=1)
+    good = pts[finite]
+    info = {
+        "file": str(path), "format": payload.info.get("format", "?"),
+        "kind": "mesh" if payload.faces is not None and payload.faces.shape[0] else "points",
+        "num_points": int(pts.shape[0]),
+        "num_faces": int(0 if payload.faces is None else payload.faces.shape[0]),
+        "bbox": [good.min(axis=0).tolist(), good.max(axis=0).tolist()] if good.size else None,
+        "attributes": [n for n in ("normals", "colors", "labels") if getattr(payload, n) is not None],
+    }
+    if payload.dropped:
+        info["dropped_nan_points"] = int(payload.dropped)
+    if not finite.all():
+        info["nonfinite_points"] = int((~finite).sum())
+    if payload.labels is not None:
+        info["num_labels"] = int(np.unique(payload.labels).size)
+    for key in ("width", "height"):
+        if key in payload.info:
+            info[key] = payload.info[key]
+    return info
+
+
+def run_info(args) -> int:
+    info = describe(args.file, **_nurbs_kwargs(args))
+    if args.json:
+        sys.stdout.write(json.dumps(info, indent=1) + "\n")
+        return 0
+    lines = [f"{info['file']}", f"  format      {info['format']}", f"  kind        {info['kind']}"]
+    if info["kind"] in ("points", "mesh"):
+        lines.append(f"  points      {info['num_points']:,}")
+        if info["kind"] == "mesh":
+            lines.append(f"  faces       {info['num_faces']:,}")
+        if "dropped_nan_points" in info:
+            lines.append(f"  NaN points  {info['dropped_nan_points']:,} (dropped when read)")
+        if "nonfinite_points" in info:
+            lines.append(f"  non-finite  {info['nonfinite_points']:,} points (read_points refuses them)")
+    else:
+        lines.append(f"  control pts {info['num_points']:,} ({' x '.join(map(str, info['sizes']))}), "
+                     f"degrees {tuple(info['degrees'])}, {'rational' if info['rational'] else 'non-rational'}")
+        lines.append(f"  domain      {info['domain']}")
+    if info.get("bbox"):
+        lo, hi = info["bbox"]
+        lines.append("  bbox min    " + " ".join(f"{x:.6g}" for x in lo))
+        lines.append("  bbox max    " + " ".join(f"{x:.6g}" for x in hi))
+    lines.append(f"  attributes  {', '.join(info['attributes']) or 'none'}")
+    if "num_labels" in info:
+        lines.append(f"  labels      {info['num_labels']} distinct")
+    sys.stdout.write("\n".join(lines) + "\n")
+    return 0
+
+
+# ---- convert ------------------------------------------------------------------------
+
+def _note(command: str, left_out: list[str], out: Path) -> None:
+    if left_out:
+        sys.stderr.write(f"nurbskit {command}: note: {out.suffix or out.name} cannot store "
+                         f"{', '.join(left_out)}; left out of {out}\n")
+
+
+def run_convert(args) -> int:
+    from ..io import formats
+    from ..io.mesh import write_mesh
+    from ..io.nurbs import is_nurbs_file, read_nurbs, write_nurbs
+    from ..io.points import write_points
+
+    src, out = Path(args.input), Path(args.output)
+    formats.check_readable(src)
+    out_ext = out.suffix.lower()
+    if out.is_dir():
+        raise OptionError(f"{out}: is a directory, expected an output file name")
+    with _progress(2, "convert") as bar:
+        if is_nurbs_file(src):
+            obj = read_nurbs(src, **_nurbs_kwargs(args))
+            bar.update(1)
+            if out_ext not in (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm"):
+                raise OptionError(
+                    f"{out}: a NURBS file converts to .json, .ctrlpts, .cptw, .smesh/.dat or .3dm, not {out_ext or 'no extension'!r}"
+                )
+            write_nurbs(out, obj, format="geomdl" if args.geomdl and out_ext == ".json" else None)
+            bar.update(1)
+            return 0
+        if _nurbs_kwargs(args):
+            raise OptionError("--sizes, --degrees, --weights and --meta apply to control-point files only")
+        payload = formats.read_payload(src)
+        bar.update(1)
+        faces = payload.faces if payload.faces is not None and payload.faces.shape[0] else None
+        if faces is not None and out_ext in formats.MESH_WRITE:
+            from ..io._base import check_finite
+
+            check_finite(src, payload.points, "vertices")
+            left = write_mesh(out, payload.points, faces, payload.normals, payload.colors,
+                              **({"binary": not args.ascii} if out_ext in (".ply", ".stl") else {}))
+            if payload.labels is not None:
+                left = left + ["labels"]
+        else:
+            if out_ext == ".stl":
+                raise InputError(f"{src}: has no faces; STL holds triangles only")
+            from ..io.points import read_points
+
+            # read_points applies the NaN policy (PCD holes dropped, other NaN refused)
+            cloud = read_points(src)
+            options = {}
+            if out_ext == ".ply":
+                options["binary"] = not args.ascii
+            if out_ext == ".pcd":
+                options["data"] = args.pcd_data or ("ascii" if args.ascii else "binary")
+            left = write_points(out, cloud.points, cloud.normals, cloud.colors, cloud.labels, **options)
+            if faces is not None:
+                left = ["faces"] + left
+        bar.update(1)
+    _note("convert", left, out)
+    return 0
+
+
+# ---- sample -------------------------------------------------------------------------
+
+def run_sample(args) -> int:
+    from ..geometry.sampling import sample_mesh
+    from ..io.mesh import read_mesh
+    from ..io.points import write_points
+
+    if args.n < 1:
+        raise OptionError(f"-n must be a positive integer, got {args.n}")
+    out = Path(args.output)
+    with _progress(3, "sample") as bar:
+        mesh = read_mesh(args.mesh)
+        bar.update(1)
+        points, face = sample_mesh(mesh.vertices, mesh.faces, args.n, method=args.method, seed=args.seed,
+                                   return_faces=True)
+        bar.update(1)
+        normals = None
+        if not args.no_normals:
+            tri = mesh.vertices[mesh.faces[face]]
+            normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            length = np.linalg.norm(normals, axis=1, keepdims=True)
+            normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+        left = write_points(out, points, normals)
+        bar.update(1)
+    _note("sample", [x for x in left if x != "normals"] if args.no_normals else left, out)
+    return 0
+
+
+__all__ = ["register", "describe", "run_info", "run_convert", "run_sample"]
+
