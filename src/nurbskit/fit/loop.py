@@ -1,0 +1,257 @@
+"""The one generic fitting loop.
+
+:func:`run_stage` runs one :class:`~nurbskit.fit.config.StageConfig`: it samples
+the current surface, adds up the weighted loss terms of
+:class:`~nurbskit.fit.config.LossWeights`, steps the optimiser (Adam, SGD or
+L-BFGS) on the trainable tensors of a
+:class:`~nurbskit.fit.params.SurfaceParameters`, reports progress through a
+callback and stops at the stage's iteration count or loss threshold. Every thesis
+pipeline and our default are sequences of such stages (:mod:`.pipelines`).
+
+What a loss term compares (``X`` the input in fit units, ``Y`` the surface sampled on
+the stage's grid):
+
+=================  =========================================================
+``l2``             ``Y`` against the ordered target: the supervised grid, the
+                   first ``R*S`` input points (UB), or the points matched one to
+                   one (UM, :mod:`.matching`)
+``chamfer``        :func:`nurbskit.losses.chamfer_distance` (X, Y)
+``hausdorff``      :func:`nurbskit.losses.hausdorff_distance` (X, Y)
+``laplacian``      supervised: Laplacian difference to the true control net (or
+                   target grid); otherwise the Laplacian energy of ``Y`` or of
+                   the control net (``laplacian_on``)
+``point_to_surface`` mean squared distance from ``X`` to its foot points
+                   (true projection; envelope-theorem gradients)
+``coverage``       mean squared distance from ``Y`` to its nearest input point
+``smoothness``     Laplacian energy of the control net
+=================  =========================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import torch
+
+from .. import losses as L
+from ..errors import OptionError
+from ..geometry.neighbors import nearest_neighbors
+from .config import StageConfig
+from .lstsq import foot_points, solve_control_points
+from .matching import one_to_one_matching
+from .params import SurfaceParameters
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class Target:
+    """What a fit is compared with, in fit units.
+
+    ``points (N, 3)`` always; supervised fits add the ordered ``grid (R, S, 3)`` (its
+    parameters are the uniform grid of the fitted surface's domain) and, when known,
+    the true control net ``control_points (n_u, n_v, 3)``.
+    """
+
+    points: Tensor
+    grid: Tensor | None = None
+    control_points: Tensor | None = None
+
+    @property
+    def supervised(self) -> bool:
+        return self.grid is not None
+
+
+@dataclass
+class Progress:
+    """One progress report: the loop calls ``callback(progress)`` after every iteration."""
+
+    stage: str
+    stage_index: int
+    iteration: int
+    stage_iters: int
+    loss: float
+    parts: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class _State:
+    """What persists between iterations of a stage (matching, foot points)."""
+
+    matched: Tensor | None = None
+    foot: Tensor | None = None
+
+
+def stage_resolution(stage: StageConfig, target: Target, default: tuple[int, int]) -> tuple[int, int]:
+    """The sampling grid of a stage: explicit, same size as the input, or the default."""
+    if stage.resolution is not None:
+        return tuple(stage.resolution)
+    if target.supervised:
+        return tuple(target.grid.shape[:2])
+    if stage.same_size_as_input:
+        r = max(2, int(math.isqrt(target.points.shape[0])))
+        return (r, r)
+    return tuple(default)
+
+
+def stage_loss(
+    params: SurfaceParameters,
+    stage: StageConfig,
+    target: Target,
+    resolution: tuple[int, int],
+    state: _State,
+    iteration: int,
+) -> tuple[Tensor, dict[str, float]]:
+    """The weighted loss of a stage for the current parameters, and its parts."""
+    w = stage.loss
+    surface = params()
+    closed_v = params.closed_v
+    if stage.eliminate_control_points:
+        surface = surface._replace(control_points=eliminated_control_points(surface, target, closed_v))
+    needs_grid = any(
+        getattr(w, k) for k in ("l2", "chamfer", "hausdorff", "coverage")
+    ) or (w.laplacian and (target.supervised or w.laplacian_on == "grid"))
+    parts: dict[str, Tensor] = {}
+    grid = flat = None
+    if needs_grid:
+        gu, gv = surface.grid_axes(resolution)
+        grid = surface.evaluate_grid(gu, gv)
+        flat = grid.reshape(-1, grid.shape[-1])
+    x = target.points
+    if w.l2:
+        if target.supervised:
+            ordered = target.grid.reshape(-1, x.shape[-1])
+        elif stage.rematch_every:
+            if state.matched is None or iteration % stage.rematch_every == 0:
+                state.matched = one_to_one_matching(flat, x)
+            ordered = x[state.matched]
+        else:
+            if x.shape[0] < flat.shape[0]:
+                raise OptionError(
+                    f"the L2 loss pairs the {flat.shape[0]} surface samples with the first input points, "
+                    f"but the input has only {x.shape[0]}"
+                )
+            ordered = x[: flat.shape[0]]  # thesis UB: points in file order
+        parts["l2"] = L.l2_loss(flat, ordered)
+    if w.chamfer:
+        parts["chamfer"] = L.chamfer_distance(x, flat)
+    if w.hausdorff:
+        parts["hausdorff"] = L.hausdorff_distance(x, flat)
+    if w.laplacian:
+        if target.supervised:
+            if target.control_points is not None and target.control_points.shape == surface.control_points.shape:
+                parts["laplacian"] = L.laplacian_supervised(surface.control_points, target.control_points)
+            else:
+                parts["laplacian"] = L.laplacian_supervised(grid, target.grid)
+        elif w.laplacian_on == "grid":
+            g = grid[:, :-1] if closed_v else grid  # the seam column repeats the first
+            parts["laplacian"] = L.laplacian_grid(g, closed_v=closed_v, boundary=w.laplacian_boundary)
+        else:
+            cp = surface.control_points[:, : params.n_v - params.degrees[1]] if closed_v else surface.control_points
+            parts["laplacian"] = L.laplacian_control(cp, closed_v=closed_v, boundary=w.laplacian_boundary)
+    if w.point_to_surface:
+        if state.foot is None or iteration % max(stage.reproject_every, 1) == 0:
+            fixed = surface.detach()
+            if state.foot is None or iteration % (10 * max(stage.reproject_every, 1)) == 0:
+                from ..core.project import project_points
+
+                state.foot = project_points(fixed, x).params
+            else:
+                state.foot = foot_points(fixed, x, state.foot, closed_v, iterations=3)
+        closest = surface.evaluate(state.foot)
+        parts["point_to_surface"] = (closest - x).square().sum(-1).mean()
+    if w.coverage:
+        _, idx = nearest_neighbors(flat.detach(), x)
+        parts["coverage"] = (flat - x[idx]).square().sum(-1).mean()
+    if w.smoothness:
+        cp = surface.control_points[:, : params.n_v - params.degrees[1]] if closed_v else surface.control_points
+        parts["smoothness"] = L.laplacian_control(cp, closed_v=closed_v)
+    total = sum(getattr(w, k) * v for k, v in parts.items())
+    return total, {k: float(v.detach()) for k, v in parts.items()}
+
+
+def grid_parameters(surface, resolution: tuple[int, int]) -> Tensor:
+    """The ``(R * S, 2)`` parameters of the uniform grid, u slowest (``surface.sample`` order)."""
+    gu, gv = surface.grid_axes(resolution)
+    uu, vv = torch.meshgrid(gu, gv, indexing="ij")
+    return torch.stack([uu.reshape(-1), vv.reshape(-1)], dim=-1)
+
+
+def eliminated_control_points(surface, target: Target, closed_v: bool) -> Tensor:
+    """Least-squares control points for a supervised grid target at the surface's knots and weights."""
+    if not target.supervised:
+        raise OptionError("eliminate_control_points needs a supervised (ordered grid) target")
+    uv = grid_parameters(surface, tuple(target.grid.shape[:2]))
+    return solve_control_points(
+        uv, target.grid.reshape(-1, target.grid.shape[-1]), surface.knot_vectors, surface.degrees,
+        surface.sizes, surface.weights, closed_v,
+    )
+
+
+def make_optimizer(stage: StageConfig, tensors: list[Tensor]) -> torch.optim.Optimizer:
+    """Adam, SGD (momentum 0.9) or L-BFGS (strong Wolfe line search) over ``tensors``."""
+    if stage.optimizer == "adam":
+        return torch.optim.Adam(tensors, lr=stage.lr)
+    if stage.optimizer == "sgd":
+        return torch.optim.SGD(tensors, lr=stage.lr, momentum=0.9)
+    if stage.optimizer == "lbfgs":
+        return torch.optim.LBFGS(
+            tensors, lr=stage.lr, max_iter=1, history_size=20, line_search_fn="strong_wolfe",
+            tolerance_grad=1e-14, tolerance_change=1e-16,
+        )
+    raise OptionError(f"optimizer must be adam, sgd or lbfgs, got {stage.optimizer!r}")
+
+
+def run_stage(
+    params: SurfaceParameters,
+    stage: StageConfig,
+    target: Target,
+    default_resolution: tuple[int, int],
+    *,
+    stage_index: int = 0,
+    callback: Callable[[Progress], None] | None = None,
+) -> list[dict]:
+    """Run one stage of the generic loop; returns one history record per iteration.
+
+    Each record is ``{"stage", "iteration", "loss", "parts"}`` with the loss *before*
+    that iteration's step. ``params`` is updated in place.
+    """
+    params.set_trainable(stage.train_control_points, stage.train_weights, stage.train_knots)
+    tensors = params.trainable()
+    history: list[dict] = []
+    if stage.iters == 0 or not tensors:
+        return history
+    resolution = stage_resolution(stage, target, default_resolution)
+    opt = make_optimizer(stage, tensors)
+    state = _State()
+    for it in range(stage.iters):
+        record: dict = {}
+
+        def closure():
+            opt.zero_grad(set_to_none=True)
+            loss, parts = stage_loss(params, stage, target, resolution, state, it)
+            loss.backward()
+            if not record:
+                record.update(loss=float(loss.detach()), parts=parts)
+            return loss
+
+        opt.step(closure)
+        if not math.isfinite(record["loss"]):
+            raise OptionError(
+                f"stage {stage.name}: the loss became {record['loss']} at iteration {it}; "
+                f"lower the learning rate (lr={stage.lr})"
+            )
+        history.append({"stage": stage.name, "iteration": it, **record})
+        if callback is not None:
+            callback(Progress(stage.name, stage_index, it, stage.iters, record["loss"], record["parts"]))
+        if stage.loss_threshold and record["loss"] < stage.loss_threshold:
+            break
+    if stage.eliminate_control_points:
+        with torch.no_grad():
+            surface = params()
+            params.load_control_points(eliminated_control_points(surface, target, params.closed_v))
+    if stage.train_knots:
+        params.freeze_knots()
+    return history

@@ -1,0 +1,223 @@
+"""Control points by linear least squares, and the alternating projection fit.
+
+With the parameters ``(u_m, v_m)`` of the data points, the knots and the weights
+fixed, a NURBS surface is linear in its control points: ``S(u_m, v_m) = A_m . P``
+with ``A[m, (i, j)] = N_i(u_m) N_j(v_m) w_ij / sum_kl N_k(u_m) N_l(v_m) w_kl``. The
+best control points solve the regularised normal equations
+
+    (A^T A + lambda D^T D) P = A^T X
+
+where ``D`` takes second differences of the control net along u and v (wrapping
+along a closed v). ``lambda`` is given *relative* to the data term
+(``smoothness * trace(A^T A) / trace(D^T D)``), so one value suits any number of
+points and control points. Every step is a torch operation: the solution is
+differentiable in the knots and the weights (used by the supervised SB preset to
+eliminate the control points, "variable projection").
+
+Alternating this solve with a projection of every point onto the surface (its foot
+point gives new parameters) is the classic fitting loop (Hoschek's parameter
+correction); :func:`alternate` runs it.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import torch
+
+from ..core import NURBSSurface
+from ..core.basis import basis_matrix
+from .params import fold_columns, wrap_columns
+
+Tensor = torch.Tensor
+
+
+def design_matrix(
+    params: Tensor,
+    knot_vectors: Sequence[Tensor],
+    degrees: Sequence[int],
+    sizes: Sequence[int],
+    weights: Tensor | None = None,
+    closed_v: bool = False,
+) -> Tensor:
+    """Rational basis values of every point for every (distinct) control point.
+
+    Shapes: ``params (M, 2)`` -> ``(M, n_u * n_free_v)`` with ``n_free_v = n_v - q``
+    when ``closed_v`` (wrapped columns folded onto the first ones), else ``n_v``.
+    Column ``i * n_free_v + j`` belongs to control point ``(i, j)``.
+    """
+    n_u, n_v = sizes
+    bu = basis_matrix(knot_vectors[0], degrees[0], n_u, params[:, 0])  # (M, n_u)
+    bv = basis_matrix(knot_vectors[1], degrees[1], n_v, params[:, 1])  # (M, n_v)
+    a = bu.unsqueeze(2) * bv.unsqueeze(1)  # (M, n_u, n_v)
+    if weights is not None:
+        a = a * weights
+        a = a / a.sum(dim=(1, 2), keepdim=True)
+    if closed_v:
+        a = fold_columns(a, n_v - degrees[1])
+    return a.reshape(a.shape[0], -1)
+
+
+def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None, device=None) -> Tensor:
+    """Second-difference operator of a control net, ``(rows, n_u * n_v)``.
+
+    Rows ``P[i-1, j] - 2 P[i, j] + P[i+1, j]`` along u and the same along v (with
+    wrap-around when ``closed_v``).
+    """
+    rows = []
+    idx = torch.arange(n_u * n_v, device=device).reshape(n_u, n_v)
+    for i in range(1, n_u - 1):
+        rows.append((idx[i - 1], idx[i], idx[i + 1]))
+    js = range(n_v) if closed_v else range(1, n_v - 1)
+    for j in js:
+        rows.append((idx[:, (j - 1) % n_v], idx[:, j], idx[:, (j + 1) % n_v]))
+    if not rows:
+        return torch.zeros(0, n_u * n_v, dtype=dtype, device=device)
+    a = torch.cat([r[0] for r in rows])
+    b = torch.cat([r[1] for r in rows])
+    c = torch.cat([r[2] for r in rows])
+    n = a.numel()
+    D = torch.zeros(n, n_u * n_v, dtype=dtype or torch.get_default_dtype(), device=device)
+    r = torch.arange(n, device=device)
+    D[r, a] += 1.0
+    D[r, b] -= 2.0
+    D[r, c] += 1.0
+    return D
+
+
+def solve_control_points(
+    params: Tensor,
+    points: Tensor,
+    knot_vectors: Sequence[Tensor],
+    degrees: Sequence[int],
+    sizes: Sequence[int],
+    weights: Tensor | None = None,
+    closed_v: bool = False,
+    smoothness: float = 0.0,
+) -> Tensor:
+    """Least-squares control points for points at known parameters.
+
+    Shapes: ``params (M, 2)``, ``points (M, dim)`` -> ``(n_u, n_v, dim)`` (the full net,
+    wrapped columns included when ``closed_v``). ``smoothness`` is relative (see the
+    module docstring); with ``smoothness=0`` and enough well-spread points the fit
+    reproduces any surface of the same knots and weights exactly.
+
+    Example:
+        >>> import torch
+        >>> from nurbskit.core import NURBSSurface
+        >>> s = NURBSSurface(torch.rand(5, 5, 3, dtype=torch.float64))
+        >>> uv = torch.rand(200, 2, dtype=torch.float64)
+        >>> P = solve_control_points(uv, s.evaluate(uv), s.knot_vectors, s.degrees, s.sizes)
+        >>> bool(torch.allclose(P, s.control_points))
+        True
+    """
+    n_u, n_v = sizes
+    A = design_matrix(params, knot_vectors, degrees, sizes, weights, closed_v)
+    n_free_v = n_v - degrees[1] if closed_v else n_v
+    AtA = A.T @ A
+    rhs = A.T @ points
+    trace = torch.diagonal(AtA).sum().detach()
+    n = AtA.shape[0]
+    if smoothness > 0:
+        D = second_differences(n_u, n_free_v, closed_v, dtype=A.dtype, device=A.device)
+        DtD = D.T @ D
+        lam = smoothness * trace / torch.diagonal(DtD).sum().clamp_min(1e-30)
+        AtA = AtA + lam * DtD
+    # A whisper of ridge keeps control points with no data nearby determined.
+    AtA = AtA + (1e-12 * trace / n) * torch.eye(n, dtype=A.dtype, device=A.device)
+    P = torch.linalg.solve(AtA, rhs).reshape(n_u, n_free_v, -1)
+    return wrap_columns(P, degrees[1]) if closed_v else P
+
+
+def foot_points(
+    surface: NURBSSurface,
+    points: Tensor,
+    params: Tensor | None = None,
+    closed_v: bool = False,
+    iterations: int = 6,
+    grid: int = 48,
+) -> Tensor:
+    """Parameters of the closest surface points (no gradient).
+
+    Shapes: ``points (N, 3)``, optional starting ``params (N, 2)`` -> ``(N, 2)``.
+    Starts from the nearest sample of a ``grid x grid`` parametric grid (or from
+    ``params``), then damped Gauss-Newton steps on ``|S(u, v) - x|^2``, clamped to the
+    domain (wrapped along a closed v). Used by the alternation, where only the foot
+    parameters matter; :func:`nurbskit.core.project.project_points` is the public
+    projection with envelope-theorem gradients.
+    """
+    with torch.no_grad():
+        (u0, u1), (v0, v1) = surface.domain
+        if params is None:
+            from scipy.spatial import cKDTree
+
+            gu, gv = surface.grid_axes((grid, grid))
+            samples = surface.evaluate_grid(gu, gv).reshape(-1, points.shape[-1])
+            _, idx = cKDTree(samples.cpu().numpy()).query(points.detach().cpu().numpy())
+            idx = torch.as_tensor(idx, device=points.device)
+            params = torch.stack([gu[idx // grid], gv[idx % grid]], dim=-1)
+        uv = params.clone()
+        for _ in range(iterations):
+            d = surface.derivatives(uv, order=1)
+            r = d[:, 0, 0] - points
+            su, sv = d[:, 1, 0], d[:, 0, 1]
+            # 2x2 normal equations of Gauss-Newton with a Levenberg damping term.
+            a = (su * su).sum(-1)
+            b = (su * sv).sum(-1)
+            c = (sv * sv).sum(-1)
+            g1 = (su * r).sum(-1)
+            g2 = (sv * r).sum(-1)
+            mu = 1e-9 * (a + c) + 1e-30
+            a, c = a + mu, c + mu
+            det = a * c - b * b
+            du = -(c * g1 - b * g2) / det
+            dv = -(a * g2 - b * g1) / det
+            # Limit a step to a quarter of the domain: the model is local.
+            du = du.clamp(-(u1 - u0) / 4, (u1 - u0) / 4)
+            dv = dv.clamp(-(v1 - v0) / 4, (v1 - v0) / 4)
+            new = torch.stack([uv[:, 0] + du, uv[:, 1] + dv], dim=-1)
+            new[:, 0] = new[:, 0].clamp(u0, u1)
+            if closed_v:
+                new[:, 1] = v0 + torch.remainder(new[:, 1] - v0, v1 - v0)
+            else:
+                new[:, 1] = new[:, 1].clamp(v0, v1)
+            # Keep a step only where it does not increase the distance.
+            better = (surface.evaluate(new) - points).square().sum(-1) <= r.square().sum(-1)
+            uv = torch.where(better.unsqueeze(-1), new, uv)
+        return uv
+
+
+def alternate(
+    surface: NURBSSurface,
+    points: Tensor,
+    rounds: int,
+    closed_v: bool = False,
+    smoothness: float = 1e-3,
+    tolerance: float = 1e-7,
+    params: Tensor | None = None,
+    callback: Callable[[int, float], None] | None = None,
+) -> tuple[NURBSSurface, Tensor, list[float]]:
+    """Alternate foot-point projection and least-squares control points.
+
+    Shapes: ``points (N, 3)`` -> (surface, foot parameters ``(N, 2)``, mean squared
+    distance after each round). Knots and weights stay as they are. Stops early when
+    a round improves the mean squared distance by less than ``tolerance``.
+    """
+    history: list[float] = []
+    with torch.no_grad():
+        for k in range(rounds):
+            params = foot_points(surface, points, params if k > 0 else None, closed_v)
+            err = float((surface.evaluate(params) - points).square().sum(-1).mean())
+            history.append(err)
+            if callback is not None:
+                callback(k, err)
+            if k > 0 and history[-2] - err < tolerance * max(history[0], 1e-30):
+                break
+            cp = solve_control_points(
+                params, points, surface.knot_vectors, surface.degrees, surface.sizes,
+                surface.weights, closed_v, smoothness,
+            )
+            surface = surface._replace(control_points=cp)
+        if rounds > 0:
+            params = foot_points(surface, points, params, closed_v, iterations=3)
+    return surface, params, history

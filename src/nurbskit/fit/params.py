@@ -1,0 +1,177 @@
+"""The trainable parametrisation of a NURBS surface.
+
+:class:`SurfaceParameters` holds what an optimiser updates and builds a
+:class:`~nurbskit.core.NURBSSurface` from it on every call (a cheap unvalidated
+``_replace``):
+
+* control points as a free tensor; a surface *closed in v* stores only the
+  ``n_v - q`` distinct columns and wraps the first ``q`` onto the end, with uniform
+  unclamped knots along v, so the seam stays closed (and C^{q-1}) whatever the
+  optimiser does;
+* weights through their logarithm (always positive);
+* interior knots through softmax gaps (always ordered, ends fixed), see
+  :func:`nurbskit.core.knots.knots_to_logits`.
+
+Convention: control points ``(n_u, n_v, dim)`` with u on the first axis, as in the core.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..core import NURBSSurface
+from ..core.knots import clamped_uniform, knots_to_logits, logits_to_knots
+
+Tensor = torch.Tensor
+
+
+def periodic_knots(n_ctrl: int, degree: int, *, dtype=None, device=None) -> Tensor:
+    """Uniform unclamped knots whose domain ``[knots[p], knots[n]]`` is ``[0, 1]``.
+
+    With the last ``degree`` control points equal to the first ``degree`` the curve is
+    closed with C^{degree-1} continuity at the seam.
+
+    Example:
+        >>> periodic_knots(6, 2).tolist()
+        [-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]
+    """
+    n_spans = n_ctrl - degree
+    i = torch.arange(n_ctrl + degree + 1, dtype=dtype or torch.get_default_dtype(), device=device)
+    return (i - degree) / n_spans
+
+
+def wrap_columns(free: Tensor, degree: int) -> Tensor:
+    """``(n_u, m, ...)`` distinct columns -> ``(n_u, m + degree, ...)`` with the seam closed."""
+    return torch.cat([free, free[:, :degree]], dim=1)
+
+
+def fold_columns(matrix: Tensor, n_free: int) -> Tensor:
+    """Fold basis columns of wrapped control points onto the distinct ones.
+
+    Shapes: ``(..., n_free + q)`` -> ``(..., n_free)``; used by least squares on
+    closed surfaces (column ``n_free + j`` is the same control point as column ``j``).
+    """
+    out = matrix[..., :n_free].clone()
+    extra = matrix.shape[-1] - n_free
+    out[..., :extra] += matrix[..., n_free:]
+    return out
+
+
+class SurfaceParameters(torch.nn.Module):
+    """Trainable control points, log-weights and knot logits of one surface.
+
+    Args:
+        surface: the starting surface; a closed one must already be periodic in v
+            (its last ``q`` control columns equal to the first ``q``).
+        closed_v: keep the surface closed in v.
+        train_control_points, train_weights, train_knots: which tensors require grad.
+
+    Example:
+        >>> import torch
+        >>> from nurbskit.core import NURBSSurface
+        >>> params = SurfaceParameters(NURBSSurface(torch.rand(5, 6, 3)), train_knots=True)
+        >>> params().evaluate_grid(torch.linspace(0, 1, 4), torch.linspace(0, 1, 4)).shape
+        torch.Size([4, 4, 3])
+    """
+
+    def __init__(
+        self,
+        surface: NURBSSurface,
+        closed_v: bool = False,
+        *,
+        train_control_points: bool = True,
+        train_weights: bool = False,
+        train_knots: bool = False,
+    ):
+        super().__init__()
+        p, q = surface.degrees
+        self.degrees = (p, q)
+        self.closed_v = bool(closed_v)
+        self.n_u, self.n_v = surface.sizes
+        cp = surface.control_points.detach()
+        w = surface.weights.detach()
+        if self.closed_v:
+            cp, w = cp[:, : self.n_v - q], w[:, : self.n_v - q]
+        self.control_points = torch.nn.Parameter(cp.clone(memory_format=torch.contiguous_format))
+        self.log_weights = torch.nn.Parameter(torch.log(w).clone(memory_format=torch.contiguous_format))
+        ku, kv = (k.detach() for k in surface.knot_vectors)
+        self.domains = [surface.domain[0], surface.domain[1]]
+        self.knot_logits_u = torch.nn.Parameter(knots_to_logits(ku, p, self.n_u).clone())
+        self.register_buffer("fixed_knots_u", ku.clone())
+        self.knot_logits_v = torch.nn.Parameter(knots_to_logits(kv, q, self.n_v).clone())
+        self.register_buffer("fixed_knots_v", kv.clone())
+        self.set_trainable(train_control_points, train_weights, train_knots)
+
+    def set_trainable(self, control_points: bool, weights: bool, knots: bool) -> None:
+        """Choose which tensors train; knots along a closed v stay uniform."""
+        self.control_points.requires_grad_(control_points)
+        self.log_weights.requires_grad_(weights)
+        self.knot_logits_u.requires_grad_(knots)
+        self.knot_logits_v.requires_grad_(knots and not self.closed_v)
+        self.train_knots = knots
+
+    def knot_vectors(self) -> list[Tensor]:
+        p, q = self.degrees
+        if self.knot_logits_u.requires_grad:
+            ku = logits_to_knots(self.knot_logits_u, p, self.domains[0])
+        else:
+            ku = self.fixed_knots_u
+        if self.knot_logits_v.requires_grad:
+            kv = logits_to_knots(self.knot_logits_v, q, self.domains[1])
+        else:
+            kv = self.fixed_knots_v
+        return [ku, kv]
+
+    def freeze_knots(self) -> None:
+        """Store the current trained knots as the fixed ones (call after a knot stage)."""
+        with torch.no_grad():
+            ku, kv = self.knot_vectors()
+            self.fixed_knots_u.copy_(ku)
+            self.fixed_knots_v.copy_(kv)
+
+    def full_control_points(self) -> Tensor:
+        cp = self.control_points
+        return wrap_columns(cp, self.degrees[1]) if self.closed_v else cp
+
+    def full_weights(self) -> Tensor:
+        w = torch.exp(self.log_weights)
+        return wrap_columns(w, self.degrees[1]) if self.closed_v else w
+
+    def forward(self) -> NURBSSurface:
+        """The current surface (differentiable in every trainable tensor)."""
+        return NURBSSurface(
+            self.full_control_points(), self.degrees, self.knot_vectors(), self.full_weights(), validate=False
+        )
+
+    def load_control_points(self, control_points: Tensor) -> None:
+        """Replace the control points (full ``(n_u, n_v, dim)`` or distinct columns)."""
+        with torch.no_grad():
+            cp = control_points
+            if self.closed_v and cp.shape[1] == self.n_v:
+                cp = cp[:, : self.n_v - self.degrees[1]]
+            self.control_points.copy_(cp)
+
+    def surface(self) -> NURBSSurface:
+        """A detached, validated copy of the current surface."""
+        s = self.forward()
+        return NURBSSurface(
+            s.control_points.detach().clone(),
+            s.degrees,
+            [k.detach().clone() for k in s.knot_vectors],
+            s.weights.detach().clone(),
+        )
+
+    def trainable(self) -> list[Tensor]:
+        return [t for t in self.parameters() if t.requires_grad]
+
+
+def new_surface(control_points: Tensor, degrees, closed_v: bool, knot_vectors=None, weights=None) -> NURBSSurface:
+    """A surface with clamped uniform knots in u and, closed in v, periodic knots in v."""
+    n_u, n_v = control_points.shape[:2]
+    p, q = degrees
+    dt, dev = control_points.dtype, control_points.device
+    if knot_vectors is None:
+        ku = clamped_uniform(n_u, p, dtype=dt, device=dev)
+        kv = periodic_knots(n_v, q, dtype=dt, device=dev) if closed_v else clamped_uniform(n_v, q, dtype=dt, device=dev)
+        knot_vectors = [ku, kv]
+    return NURBSSurface(control_points, (p, q), knot_vectors, weights)
