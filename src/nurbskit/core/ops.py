@@ -134,7 +134,9 @@ def _apply(obj: TensorSpline, axis: int, matrix: np.ndarray, knots: np.ndarray, 
     """
     Pw = homogeneous(obj.control_points, obj.weights)  # (n_1, ..., n_k, dim + 1)
     T = torch.as_tensor(matrix, dtype=Pw.dtype, device=Pw.device)
-    moved = torch.tensordot(T, Pw.movedim(axis, 0), dims=([1], [0])).movedim(0, axis)
+    # One GEMM on a reshaped view: (n_new, n_old) @ (n_old, everything else).
+    front = Pw.movedim(axis, 0)
+    moved = (T @ front.reshape(front.shape[0], -1)).reshape((T.shape[0],) + front.shape[1:]).movedim(0, axis)
     kv_old = obj.knot_vectors[axis]
     kvs = list(obj.knot_vectors)
     kvs[axis] = torch.as_tensor(knots, dtype=torch.float64).to(dtype=kv_old.dtype, device=kv_old.device)
