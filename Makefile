@@ -21,7 +21,7 @@ demo: $(VENV)/.installed
 	$(PY) -m nurbskit.demo --out out
 
 test: $(VENV)/.installed
-	$(PY) -m pytest
+	$(PY) -m pytest -q
 
 bench: $(VENV)/.installed
 	$(PY) benchmarks/run_all.py

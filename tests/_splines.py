@@ -1,0 +1,54 @@
+"""Random splines for tests: non-uniform knots, repeated interior knots, any domain."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def random_knots(rng: np.random.Generator, n: int, p: int, domain=(0.0, 1.0), repeat: bool = True) -> np.ndarray:
+    """Clamped knot vector with random interior knots; one may repeat up to multiplicity p."""
+    a, b = domain
+    n_inner = n - p - 1
+    inner = np.sort(rng.uniform(a, b, n_inner))
+    if repeat and n_inner >= 2 and p >= 2:
+        i = rng.integers(0, n_inner - 1)
+        mult = int(min(p, n_inner - i))
+        inner[i : i + mult] = inner[i]
+        inner = np.sort(inner)
+    return np.concatenate([np.full(p + 1, a), inner, np.full(p + 1, b)])
+
+
+def random_domain(rng: np.random.Generator) -> tuple[float, float]:
+    a = float(rng.uniform(-3, 3))
+    return a, a + float(rng.uniform(0.5, 4))
+
+
+def random_spline(cls, rng: np.random.Generator, degrees, sizes, dim=3, rational=True, domains=None, dtype=torch.float64):
+    """A random curve/surface/volume of class ``cls`` with the given degrees and sizes."""
+    domains = domains or [random_domain(rng) for _ in degrees]
+    kvs = [torch.tensor(random_knots(rng, n, p, d), dtype=dtype) for n, p, d in zip(sizes, degrees, domains)]
+    cp = torch.tensor(rng.normal(size=tuple(sizes) + (dim,)), dtype=dtype)
+    w = torch.tensor(rng.uniform(0.3, 2.0, size=tuple(sizes)), dtype=dtype) if rational else None
+    if len(degrees) == 1:
+        return cls(cp, degrees[0], kvs[0], w)
+    return cls(cp, degrees, kvs, w)
+
+
+def random_params(rng: np.random.Generator, spline, m: int, ends: bool = True) -> torch.Tensor:
+    """``(M, k)`` parameters inside the domain, with the corners of the domain included."""
+    lo = np.array([d[0] for d in spline.domain])
+    hi = np.array([d[1] for d in spline.domain])
+    pts = rng.uniform(lo, hi, size=(m, len(lo)))
+    if ends:
+        corners = np.array(np.meshgrid(*[[l, h] for l, h in zip(lo, hi)], indexing="ij")).reshape(len(lo), -1).T
+        pts = np.concatenate([corners, pts])
+    return torch.tensor(pts, dtype=spline.dtype)
+
+
+def to_geomdl_params(spline, params: torch.Tensor) -> np.ndarray:
+    """geomdl normalises clamped knot vectors to [0, 1]: map our parameters onto that."""
+    lo = np.array([float(kv[0]) for kv in spline.knot_vectors])
+    hi = np.array([float(kv[-1]) for kv in spline.knot_vectors])
+    t = (params.reshape(-1, len(lo)).numpy() - lo) / (hi - lo)
+    return np.clip(t, 0.0, 1.0), hi - lo

@@ -1,0 +1,315 @@
+"""Point projection (core.project) against closed forms, a dense-sampling oracle and
+finite differences.
+
+The exact surfaces are rational quadratic: the octant of the unit sphere (tensor product
+of two rational quarter circles, a surface of revolution) and a quarter of a cylinder.
+For both, the closest point of the *patch* to any point of space has a closed form:
+
+* octant: maximise ``p . q`` over unit ``q >= 0``: ``q = p_+ / |p_+|`` where the positive
+  part ``p_+`` is non-zero, else the axis vertex ``e_i`` with the largest ``p_i``;
+* quarter cylinder ``(R cos t, R sin t, z)``, ``t in [0, pi/2]``, ``z in [z0, z1]``: the
+  same rule in ``(x, y)`` on the quarter circle, and ``z`` clamped.
+
+So points beyond the edges (foot point on a boundary curve) and beyond the corners
+(a corner) are covered by the same formulas.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from nurbskit import NURBSCurve, NURBSSurface, NURBSVolume, NurbskitError
+from nurbskit.core.project import nearest_grid_params, project_points, project_points_curve
+
+F64 = torch.float64
+S2 = 2 ** -0.5
+ARC = torch.tensor([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=F64)  # rational quarter circle
+ARC_W = torch.tensor([1.0, S2, 1.0], dtype=F64)
+
+
+def sphere_octant() -> NURBSSurface:
+    """Unit sphere, x, y, z >= 0: u is the longitude (0 at +x), v the latitude (1 at the pole)."""
+    cp = torch.empty(3, 3, 3, dtype=F64)
+    for i in range(3):
+        for j in range(3):
+            r, z = ARC[j]
+            cp[i, j] = torch.stack([r * ARC[i, 0], r * ARC[i, 1], z])
+    return NURBSSurface(cp, degrees=(2, 2), weights=ARC_W[:, None] * ARC_W[None, :])
+
+
+RADIUS, Z0, Z1 = 2.0, 0.5, 3.5
+U_DOM, V_DOM = (-1.0, 2.0), (0.0, 4.0)
+
+
+def cylinder_quarter() -> NURBSSurface:
+    """``(2 cos t, 2 sin t, z)``, ``t in [0, pi/2]``, ``z in [0.5, 3.5]`` on the domain [-1, 2] x [0, 4]."""
+    cp = torch.empty(3, 2, 3, dtype=F64)
+    for i in range(3):
+        for j, z in enumerate((Z0, Z1)):
+            cp[i, j] = torch.tensor([RADIUS * ARC[i, 0], RADIUS * ARC[i, 1], z], dtype=F64)
+    a, b = U_DOM
+    c, d = V_DOM
+    kv = [torch.tensor([a, a, a, b, b, b], dtype=F64), torch.tensor([c, c, d, d], dtype=F64)]
+    return NURBSSurface(cp, degrees=(2, 1), knot_vectors=kv, weights=ARC_W[:, None].expand(3, 2).clone())
+
+
+def _closest_on_quarter(p: torch.Tensor) -> torch.Tensor:
+    """Closest point of the unit quarter sphere/circle ``{q >= 0, |q| = 1}`` to ``p (N, k)``."""
+    pos = p.clamp_min(0)
+    norm = pos.norm(dim=-1, keepdim=True)
+    vertex = torch.nn.functional.one_hot(p.argmax(dim=-1), p.shape[-1]).to(p.dtype)
+    return torch.where(norm > 0, pos / norm.clamp_min(1e-300), vertex)
+
+
+def sphere_closest(p: torch.Tensor) -> torch.Tensor:
+    return _closest_on_quarter(p)
+
+
+def cylinder_closest(p: torch.Tensor) -> torch.Tensor:
+    xy = RADIUS * _closest_on_quarter(p[:, :2])
+    return torch.cat([xy, p[:, 2:].clamp(Z0, Z1)], dim=-1)
+
+
+def smooth_height_field(seed: int = 0, n=(6, 5), degrees=(3, 2)) -> NURBSSurface:
+    """A gently curved rational height field on [0, 2] x [-1, 1] (unique foot points near it)."""
+    rng = np.random.default_rng(seed)
+    u = np.linspace(0, 2, n[0])
+    v = np.linspace(-1, 1, n[1])
+    cp = np.stack([*np.meshgrid(u, v, indexing="ij"), 0.15 * rng.normal(size=n)], axis=-1)
+    w = rng.uniform(0.7, 1.4, size=n)
+    kv = [
+        torch.tensor(np.r_[[0.0] * degrees[0], np.linspace(0, 2, n[0] - degrees[0] + 1), [2.0] * degrees[0]], dtype=F64),
+        torch.tensor(np.r_[[-1.0] * degrees[1], np.linspace(-1, 1, n[1] - degrees[1] + 1), [1.0] * degrees[1]], dtype=F64),
+    ]
+    return NURBSSurface(torch.tensor(cp, dtype=F64), degrees=degrees, knot_vectors=kv, weights=torch.tensor(w, dtype=F64))
+
+
+# ---- closed forms -----------------------------------------------------------------------
+def test_sphere_octant_is_exact():
+    s = sphere_octant()
+    uv = torch.rand(200, 2, dtype=F64, generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(s.evaluate(uv).norm(dim=-1), torch.ones(200, dtype=F64), atol=1e-14)
+
+
+def test_sphere_points_above_and_below_the_patch():
+    g = torch.Generator().manual_seed(1)
+    d = torch.randn(1500, 3, dtype=F64, generator=g).abs()
+    d = d / d.norm(dim=-1, keepdim=True)
+    rho = 0.2 + 2.8 * torch.rand(1500, dtype=F64, generator=g)
+    params, closest, distance = project_points(sphere_octant(), d * rho[:, None])
+    assert params.shape == (1500, 2) and closest.shape == (1500, 3) and distance.shape == (1500,)
+    assert torch.allclose(distance, (rho - 1).abs(), rtol=0, atol=1e-9)
+    assert torch.allclose(closest, d, rtol=0, atol=1e-9)
+    assert (params >= 0).all() and (params <= 1).all()
+
+
+def test_sphere_any_point_of_space_edges_corners_and_pole():
+    # Most of these points lie beyond an edge or a corner of the octant, or have the pole
+    # (where the parametrisation degenerates) as their foot point.
+    g = torch.Generator().manual_seed(2)
+    p = 1.5 * torch.randn(3000, 3, dtype=F64, generator=g)
+    _, closest, distance = project_points(sphere_octant(), p)
+    q = sphere_closest(p)
+    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
+    assert torch.allclose(closest, q, rtol=0, atol=1e-7)  # foot point: first order in the distance error
+
+
+def test_sphere_boundary_curves_closed_form():
+    # y < 0: the foot point lies on the meridian u = 0 (the y = 0 edge), at (x, 0, z) / |(x, 0, z)|.
+    g = torch.Generator().manual_seed(3)
+    p = torch.rand(400, 3, dtype=F64, generator=g) * torch.tensor([2.0, -2.0, 2.0], dtype=F64) + torch.tensor([0.05, -0.01, 0.05], dtype=F64)
+    params, closest, distance = project_points(sphere_octant(), p)
+    q = p * torch.tensor([1.0, 0.0, 1.0], dtype=F64)
+    q = q / q.norm(dim=-1, keepdim=True)
+    assert torch.allclose(params[:, 0], torch.zeros(400, dtype=F64), atol=0)  # held exactly on the edge
+    assert torch.allclose(closest, q, atol=1e-9)
+    assert torch.allclose(distance, (p - q).norm(dim=-1), atol=1e-9)
+    # z < 0, x, y > 0: the foot point is on the equator v = 0.
+    p = p * torch.tensor([1.0, -1.0, -1.0], dtype=F64)
+    params, closest, _ = project_points(sphere_octant(), p)
+    q = p * torch.tensor([1.0, 1.0, 0.0], dtype=F64)
+    assert torch.equal(params[:, 1], torch.zeros(400, dtype=F64))
+    assert torch.allclose(closest, q / q.norm(dim=-1, keepdim=True), atol=1e-9)
+
+
+def test_cylinder_radial_distance_and_outside_points():
+    g = torch.Generator().manual_seed(4)
+    n = 1500
+    theta = torch.rand(n, dtype=F64, generator=g) * math.pi / 2
+    rho = 0.3 + 3.7 * torch.rand(n, dtype=F64, generator=g)
+    z = Z0 + (Z1 - Z0) * torch.rand(n, dtype=F64, generator=g)
+    p = torch.stack([rho * theta.cos(), rho * theta.sin(), z], dim=-1)
+    params, closest, distance = project_points(cylinder_quarter(), p)
+    assert torch.allclose(distance, (rho - RADIUS).abs(), rtol=0, atol=1e-9)
+    assert torch.allclose(closest, torch.stack([RADIUS * theta.cos(), RADIUS * theta.sin(), z], -1), atol=1e-9)
+    # v is linear in z on this patch: z = Z0 + (Z1 - Z0) * (v - 0) / 4
+    assert torch.allclose(params[:, 1], (z - Z0) / (Z1 - Z0) * V_DOM[1], atol=1e-9)
+    assert ((params[:, 0] >= U_DOM[0]) & (params[:, 0] <= U_DOM[1])).all()
+    # anywhere in space: beyond the top, bottom and side edges, and the corners
+    p = torch.randn(3000, 3, dtype=F64, generator=g) * torch.tensor([3.0, 3.0, 3.0], dtype=F64) + torch.tensor([0, 0, 2.0], dtype=F64)
+    params, closest, distance = project_points(cylinder_quarter(), p)
+    q = cylinder_closest(p)
+    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
+    assert torch.allclose(closest, q, rtol=0, atol=1e-7)
+    assert ((params >= torch.tensor([U_DOM[0], V_DOM[0]], dtype=F64)) & (params <= torch.tensor([U_DOM[1], V_DOM[1]], dtype=F64))).all()
+
+
+def test_points_on_the_surface_recover_their_parameters():
+    s = smooth_height_field()
+    g = torch.Generator().manual_seed(5)
+    uv = torch.rand(500, 2, dtype=F64, generator=g) * torch.tensor([2.0, 2.0], dtype=F64) + torch.tensor([0.0, -1.0], dtype=F64)
+    edges = torch.tensor([[0, -1], [2, -1], [0, 1], [2, 1], [0, 0.3], [2, -0.4], [1.1, -1], [0.7, 1]], dtype=F64)
+    uv = torch.cat([edges, uv])
+    params, closest, distance = project_points(s, s.evaluate(uv))
+    assert distance.max() < 1e-12
+    assert torch.allclose(params, uv, rtol=0, atol=1e-9)
+    assert torch.equal(params[:8], edges)  # edge and corner parameters come back exactly
+
+
+def test_never_worse_than_dense_sampling():
+    # Oracle: the nearest of 600 x 600 samples (a KD-tree). Newton must be at least as close.
+    from scipy.spatial import cKDTree
+
+    s = smooth_height_field(seed=6)
+    g = torch.Generator().manual_seed(6)
+    p = torch.rand(2000, 3, dtype=F64, generator=g) * torch.tensor([3.0, 3.0, 1.0], dtype=F64) - torch.tensor([0.5, 1.5, 0.5], dtype=F64)
+    _, _, distance = project_points(s, p)
+    dense = s.sample(600).reshape(-1, 3).numpy()
+    oracle = torch.as_tensor(cKDTree(dense).query(p.numpy())[0])
+    assert (distance <= oracle + 1e-12).all()
+    assert (oracle - distance).max() < 1e-2  # and the oracle is not far off either (600 samples)
+
+
+# ---- gradients --------------------------------------------------------------------------
+def _fd_check(make, tensor, points, eps=1e-6, entries=None):
+    """Central differences of sum(distance^2) in each entry of ``tensor``, re-projecting each time."""
+    base = tensor.detach().clone()
+    flat_idx = range(base.numel()) if entries is None else entries
+    out = []
+    for i in flat_idx:
+        vals = []
+        for sign in (1, -1):
+            t = base.clone().reshape(-1)
+            t[i] += sign * eps
+            vals.append(float(project_points(make(t.reshape(base.shape)), points).distance.square().sum()))
+        out.append((vals[0] - vals[1]) / (2 * eps))
+    return torch.tensor(out, dtype=F64)
+
+
+def test_envelope_gradient_matches_finite_differences():
+    s0 = smooth_height_field(seed=7, n=(4, 4), degrees=(2, 3))
+    g = torch.Generator().manual_seed(7)
+    # inside, above/below, and beyond the edges (boundary foot points)
+    p = torch.rand(24, 3, dtype=F64, generator=g) * torch.tensor([2.6, 2.6, 0.8], dtype=F64) - torch.tensor([0.3, 1.3, 0.4], dtype=F64)
+    p.requires_grad_(True)
+    cp = s0.control_points.clone().requires_grad_(True)
+    w = s0.weights.clone().requires_grad_(True)
+    s = NURBSSurface(cp, s0.degrees, s0.knot_vectors, w)
+    _, closest, distance = project_points(s, p)
+    distance.square().sum().backward()
+
+    fd_cp = _fd_check(lambda c: NURBSSurface(c, s0.degrees, s0.knot_vectors, s0.weights), cp, p.detach())
+    assert torch.allclose(cp.grad.reshape(-1), fd_cp, rtol=1e-5, atol=1e-7)
+    fd_w = _fd_check(lambda ww: NURBSSurface(s0.control_points, s0.degrees, s0.knot_vectors, ww), w, p.detach())
+    assert torch.allclose(w.grad.reshape(-1), fd_w, rtol=1e-5, atol=1e-7)
+    # gradient w.r.t. the points: d/dp |p - c|^2 = 2 (p - c) with the foot point fixed
+    assert torch.allclose(p.grad, 2 * (p.detach() - closest.detach()), atol=1e-12)
+
+
+def test_envelope_gradient_in_an_interior_knot():
+    s0 = smooth_height_field(seed=8, n=(5, 4), degrees=(2, 2))
+    g = torch.Generator().manual_seed(8)
+    p = torch.rand(20, 3, dtype=F64, generator=g) * torch.tensor([2.0, 2.0, 0.6], dtype=F64) - torch.tensor([0.0, 1.0, 0.3], dtype=F64)
+    kv = s0.knot_vectors[0].clone().requires_grad_(True)
+    s = NURBSSurface(s0.control_points, s0.degrees, [kv, s0.knot_vectors[1]], s0.weights)
+    project_points(s, p).distance.square().sum().backward()
+    interior = [3, 4]  # [0, 0, 0, k3, k4, 2, 2, 2]
+    fd = _fd_check(lambda k: NURBSSurface(s0.control_points, s0.degrees, [k, s0.knot_vectors[1]], s0.weights), kv, p, entries=interior)
+    assert torch.allclose(kv.grad[interior], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_gradcheck_distance_in_points_and_control_points():
+    s0 = sphere_octant()
+    p = torch.tensor([[0.5, 0.6, 0.9], [2.0, -0.5, 0.3], [0.1, 0.2, -1.0]], dtype=F64, requires_grad=True)
+    cp = s0.control_points.clone().requires_grad_(True)
+
+    def fn(points, control_points):
+        return project_points(NURBSSurface(control_points, (2, 2), None, s0.weights), points).distance
+
+    assert torch.autograd.gradcheck(fn, (p, cp), eps=1e-6, atol=1e-6)
+
+
+# ---- curves -----------------------------------------------------------------------------
+def quarter_circle(a=0.0, b=1.0) -> NURBSCurve:
+    return NURBSCurve(ARC.clone(), degree=2, knot_vector=torch.tensor([a, a, a, b, b, b], dtype=F64), weights=ARC_W)
+
+
+def test_curve_quarter_circle_closed_form():
+    g = torch.Generator().manual_seed(9)
+    p = 2 * torch.randn(2000, 2, dtype=F64, generator=g)
+    params, closest, distance = project_points_curve(quarter_circle(-2.0, 3.0), p)
+    q = _closest_on_quarter(p)
+    assert params.shape == (2000,) and closest.shape == (2000, 2)
+    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
+    assert torch.allclose(closest, q, atol=1e-7)
+    assert ((params >= -2) & (params <= 3)).all()
+    # beyond the ends: exactly the end parameters
+    ends = project_points_curve(quarter_circle(-2.0, 3.0), torch.tensor([[3.0, -1.0], [-1.0, 3.0]], dtype=F64)).params
+    assert ends.tolist() == [-2.0, 3.0]
+
+
+def test_curve_in_3d_gradient_and_project_points_accepts_curves():
+    rng = np.random.default_rng(10)
+    cp = torch.tensor(np.cumsum(rng.normal(size=(6, 3)), axis=0), dtype=F64, requires_grad=True)
+    c = NURBSCurve(cp, degree=3, weights=torch.tensor(rng.uniform(0.6, 1.5, 6), dtype=F64))
+    p = torch.tensor(rng.normal(size=(15, 3)), dtype=F64) + cp.detach().mean(0)
+    res = project_points(c, p)
+    assert torch.equal(res.params, project_points_curve(c, p).params)
+    dense = c.evaluate(torch.linspace(0, 1, 200001, dtype=F64))
+    assert (res.distance.detach() <= torch.cdist(p, dense).min(1).values + 1e-12).all()
+    res.distance.square().sum().backward()
+    fd = _fd_check(lambda x: NURBSCurve(x, 3, None, c.weights), cp, p)
+    assert torch.allclose(cp.grad.reshape(-1), fd, rtol=1e-5, atol=1e-7)
+
+
+# ---- conventions ------------------------------------------------------------------------
+def test_batch_dims_dtype_and_empty():
+    s = cylinder_quarter()
+    p = torch.randn(2, 5, 3, dtype=F64)
+    params, closest, distance = project_points(s, p)
+    assert params.shape == (2, 5, 2) and closest.shape == (2, 5, 3) and distance.shape == (2, 5)
+    flat = project_points(s, p.reshape(10, 3))
+    assert torch.allclose(distance.reshape(-1), flat.distance)
+    empty = project_points(s, torch.zeros(0, 3, dtype=F64))
+    assert empty.params.shape == (0, 2) and empty.distance.shape == (0,)
+    # float32 follows the surface and stays close to the float64 answer
+    s32 = s.to(torch.float32)
+    r32 = project_points(s32, p.reshape(10, 3))
+    assert r32.distance.dtype == torch.float32 and r32.params.dtype == torch.float32
+    assert torch.allclose(r32.distance.double(), flat.distance, atol=1e-4)
+
+
+def test_grid_start_is_the_nearest_sample():
+    s = cylinder_quarter()
+    p = torch.tensor([[2.0, 0.0, 0.5], [0.0, 2.0, 3.5]], dtype=F64)  # two corners of the patch
+    assert nearest_grid_params(s, p, grid=5).tolist() == [[-1.0, 0.0], [2.0, 4.0]]
+    # an explicit coarse grid still converges (Newton does the rest)
+    assert torch.allclose(project_points(s, p + 0.1, grid=2).distance, project_points(s, p + 0.1).distance, atol=1e-12)
+
+
+def test_errors_name_the_problem():
+    s = cylinder_quarter()
+    with pytest.raises(NurbskitError, match=r"\(\.\.\., N, 3\).*got \(4, 2\)"):
+        project_points(s, torch.zeros(4, 2, dtype=F64))
+    with pytest.raises(NurbskitError, match="NaN"):
+        project_points(s, torch.tensor([[float("nan"), 0, 0]], dtype=F64))
+    with pytest.raises(NurbskitError, match="grid must be 2"):
+        project_points(s, torch.zeros(1, 3, dtype=F64), grid=(8,))
+    with pytest.raises(NurbskitError, match="NURBSVolume"):
+        project_points(NURBSVolume(torch.rand(2, 2, 2, 3, dtype=F64), degrees=(1, 1, 1)), torch.zeros(1, 3, dtype=F64))
+    with pytest.raises(NurbskitError, match="NURBSCurve"):
+        project_points_curve(s, torch.zeros(1, 3, dtype=F64))
