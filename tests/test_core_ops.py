@@ -532,3 +532,27 @@ def test_core_find_spans_at_a_repeated_unclamped_end():
     c = NURBSCurve(torch.rand(5, 2, dtype=torch.float64), 2, knots)
     end = c.evaluate(torch.tensor([1.0], dtype=torch.float64))[0]
     assert torch.allclose(end, c.control_points[3], atol=TOL, rtol=0)
+
+
+def test_split_at_an_interior_break_and_clamp_over_long_end_runs():
+    """Multiplicity p + 1 inside (a break) splits without insertion; p + 2 equal end knots
+    (an empty first span) are clamped away by decompose_bezier and elevate_degree."""
+    rng = np.random.default_rng(170)
+    p, a, m, b = 2, -1.0, 0.25, 2.0
+    broken = NURBSCurve(torch.tensor(rng.normal(size=(6, 3))), p, [a] * 3 + [m] * 3 + [b] * 3,
+                        torch.tensor(rng.uniform(0.5, 2, 6)))
+    first, second = split(broken, m)
+    assert first.sizes == second.sizes == (3,)
+    assert torch.allclose(first.control_points, broken.control_points[:3], atol=TOL, rtol=0)
+    assert torch.allclose(second.control_points, broken.control_points[3:], atol=TOL, rtol=0)
+    left = torch.linspace(a, m, 30, dtype=torch.float64)[:-1]  # the break belongs to the right piece
+    right = torch.linspace(m, b, 30, dtype=torch.float64)
+    np.testing.assert_allclose(first.evaluate(left).numpy(), broken.evaluate(left).numpy(), atol=TOL, rtol=0)
+    np.testing.assert_allclose(second.evaluate(right).numpy(), broken.evaluate(right).numpy(), atol=TOL, rtol=0)
+
+    long_run = NURBSCurve(torch.tensor(rng.normal(size=(7, 2))), 3, [0.0] * 5 + [0.4, 0.7] + [1.0] * 4)
+    u = torch.linspace(0, 1, 50, dtype=torch.float64)
+    for out in (elevate_degree(long_run), *decompose_bezier(long_run)):
+        assert int((out.knot_vector == out.knot_vector[0]).sum()) == out.degree + 1
+        inside = u[(u >= out.domain[0][0]) & (u <= out.domain[0][1])]
+        np.testing.assert_allclose(out.evaluate(inside).numpy(), long_run.evaluate(inside).numpy(), atol=TOL, rtol=0)

@@ -22,7 +22,7 @@ from nurbskit.core import NURBSCurve, NURBSSurface, NURBSVolume, basis_functions
 from nurbskit.core.ops import elevate_degree, insert_knot, refine_knots
 
 TOL = 1e-10
-SETTINGS = settings(max_examples=25, deadline=None)
+SETTINGS = settings(max_examples=20, deadline=None)
 
 
 # ---- strategies --------------------------------------------------------------------------
