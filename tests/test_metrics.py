@@ -150,3 +150,39 @@ def test_metric_errors():
         metrics.evaluate_fit(s, torch.rand(5, 2))
     with pytest.raises(NurbskitError, match="empty"):
         metrics.chamfer(torch.rand(0, 3), torch.rand(4, 3))
+
+
+def _cylinder():
+    """Exact rational unit cylinder, closed in u (the seam row repeats), z in [0, 1]."""
+    w = math.sqrt(0.5)
+    ring = torch.tensor([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1], [1, 0]], dtype=F64)
+    rw = torch.tensor([1, w, 1, w, 1, w, 1, w, 1], dtype=F64)
+    cp = torch.stack([torch.cat([ring, torch.full((9, 1), z, dtype=F64)], -1) for z in (0.0, 1.0)], 1)
+    knots_u = torch.tensor([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1], dtype=F64)
+    knots_v = torch.tensor([0, 0, 1, 1], dtype=F64)
+    return NURBSSurface(cp, degrees=(2, 1), knot_vectors=[knots_u, knots_v], weights=rw[:, None].repeat(1, 2))
+
+
+def test_closed_laplacian_drops_the_repeated_seam():
+    s = _cylinder()
+    grid = s.sample((33, 5))
+    assert torch.allclose(grid[0], grid[-1])
+    wrapped = L.laplacian_grid(grid[:-1], closed_u=True).item()
+    assert metrics.laplacian(s, (33, 5), closed_u=True) == pytest.approx(wrapped, rel=1e-12)
+    assert metrics.laplacian(grid, closed_u=True) == pytest.approx(wrapped, rel=1e-12)
+    # wrapping onto the duplicated row would put a kink at the seam
+    assert L.laplacian_grid(grid, closed_u=True).item() > 1.01 * wrapped
+    pts = grid.reshape(-1, 3)
+    report = metrics.evaluate_fit(s, pts, (33, 5), closed_u=True)
+    assert report["laplacian"] == pytest.approx(wrapped, rel=1e-12)
+    assert report["laplacian_control"] == pytest.approx(
+        L.laplacian_control(s.control_points[:-1], closed_u=True).item(), rel=1e-12
+    )
+    assert report["to_surface_max"] < 1e-9 and report["chamfer"] == 0.0
+
+
+def test_strip_seam_removes_up_to_degree_repeated_rows():
+    net = _rand(7, 4, 3, seed=8)
+    periodic = torch.cat([net, net[:2]], 0)  # a periodic net of degree 2 wraps two rows
+    assert torch.equal(metrics._strip_seam(periodic, -3, 2), net)
+    assert torch.equal(metrics._strip_seam(net, -3, 2), net)  # nothing repeated: unchanged

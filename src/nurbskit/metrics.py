@@ -68,6 +68,24 @@ def hausdorff(x, y) -> float:
         return float(losses.hausdorff_distance(_cloud(x, "x"), _cloud(y, "y")))
 
 
+def _strip_seam(grid: Tensor, axis: int, max_repeat: int) -> Tensor:
+    """Drop trailing rows along ``axis`` that repeat the leading ones (a closed seam)."""
+    n = grid.shape[axis]
+    scale = float(grid.abs().max()) if grid.numel() else 0.0
+    for k in range(min(max_repeat, n - 1), 0, -1):
+        if torch.allclose(grid.narrow(axis, n - k, k), grid.narrow(axis, 0, k), rtol=0, atol=1e-7 * (scale or 1.0)):
+            return grid.narrow(axis, 0, n - k)
+    return grid
+
+
+def _closed_grid(grid: Tensor, closed_u: bool, closed_v: bool, repeat: tuple[int, int] = (1, 1)) -> Tensor:
+    if closed_u:
+        grid = _strip_seam(grid, -3, repeat[0])
+    if closed_v:
+        grid = _strip_seam(grid, -2, repeat[1])
+    return grid
+
+
 def laplacian(
     grid,
     resolution: int | Sequence[int] | None = None,
@@ -82,8 +100,10 @@ def laplacian(
     uniform ``resolution`` grid first (default 64 x 64, the thesis's output grid).
 
     Convention: this is :func:`nurbskit.losses.laplacian_grid` (mean over nodes, boundary
-    rule ``boundary``). The per-node value scales like ``h^4`` with the grid spacing, so
-    compare it only at equal resolution.
+    rule ``boundary``). With ``closed_u`` / ``closed_v`` the direction wraps, and a last
+    row (column) that repeats the first, as a sampled closed surface has, is dropped
+    first. The per-node value scales like ``h^4`` with the grid spacing, so compare it
+    only at equal resolution.
 
     Example:
         >>> import torch
@@ -94,7 +114,7 @@ def laplacian(
         if hasattr(grid, "sample"):
             grid = grid.detach().sample(DEFAULT_RESOLUTION if resolution is None else resolution)
         g = grid if isinstance(grid, Tensor) else torch.as_tensor(np.asarray(grid, dtype=np.float64))
-        g = g.detach().to(torch.float64)
+        g = _closed_grid(g.detach().to(torch.float64), closed_u, closed_v)
         return float(losses.laplacian_grid(g, closed_u=closed_u, closed_v=closed_v, boundary=boundary))
 
 
@@ -217,7 +237,8 @@ def evaluate_fit(
     * ``chamfer``, ``hausdorff``: between the ``R * S`` samples and ``points``;
     * ``laplacian``: of the sample grid (:func:`laplacian`; ``closed_*``, ``boundary``);
     * ``combined``: ``chamfer + hausdorff + 0.1 * laplacian`` (thesis, Table 6.3);
-    * ``laplacian_control``: the same energy on the control net (the thesis's variant);
+    * ``laplacian_control``: the same energy on the control net (the thesis's variant;
+      for a closed direction the control rows repeated at the seam are dropped first);
     * ``diagonal``, ``to_surface_{mean,p95,max}``, ``overshoot_{mean,p95,max}`` from
       :func:`surface_distances`.
 
@@ -245,7 +266,9 @@ def evaluate_fit(
             "laplacian": laplacian(grid, **opts),
         }
         out["combined"] = combined_metric(out["chamfer"], out["hausdorff"], out["laplacian"])
-        out["laplacian_control"] = laplacian(s64.control_points, **opts)
+        # a closed net repeats 1 (clamped) to p (periodic) rows at the seam: drop them
+        net = _closed_grid(s64.control_points, closed_u, closed_v, s64.degrees)
+        out["laplacian_control"] = float(losses.laplacian_control(net, **opts))
         out.update(surface_distances(s64, pts, resolution, samples=grid, **project_options))
     return out
 
