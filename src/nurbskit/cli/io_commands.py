@@ -109,18 +109,18 @@ def describe(path: str | Path, **nurbs_options) -> dict:
     pts = payload.points
     finite = np.isfinite(pts).all(axis=1)
     good = pts[finite]
+    pcd = payload.info.get("format", "").startswith("pcd")
     info = {
         "file": str(path), "format": payload.info.get("format", "?"),
         "kind": "mesh" if payload.faces is not None and payload.faces.shape[0] else "points",
-        "num_points": int(pts.shape[0]),
+        # for PCD, the points read_points returns: NaN holes are not points
+        "num_points": int(finite.sum() if pcd else pts.shape[0]),
         "num_faces": int(0 if payload.faces is None else payload.faces.shape[0]),
         "bbox": [good.min(axis=0).tolist(), good.max(axis=0).tolist()] if good.size else None,
         "attributes": [n for n in ("normals", "colors", "labels") if getattr(payload, n) is not None],
     }
-    if payload.dropped:
-        info["dropped_nan_points"] = int(payload.dropped)
     if not finite.all():
-        info["nonfinite_points"] = int((~finite).sum())
+        info["dropped_nan_points" if pcd else "nonfinite_points"] = int((~finite).sum())
     if payload.labels is not None:
         info["num_labels"] = int(np.unique(payload.labels).size)
     for key in ("width", "height"):
@@ -140,7 +140,7 @@ def run_info(args) -> int:
         if info["kind"] == "mesh":
             lines.append(f"  faces       {info['num_faces']:,}")
         if "dropped_nan_points" in info:
-            lines.append(f"  NaN points  {info['dropped_nan_points']:,} (dropped when read)")
+            lines.append(f"  NaN holes   {info['dropped_nan_points']:,} (not counted as points; read_points drops them)")
         if "nonfinite_points" in info:
             lines.append(f"  non-finite  {info['nonfinite_points']:,} points (read_points refuses them)")
     else:

@@ -21,21 +21,24 @@ class LZFError(ValueError):
     """A corrupt or truncated LZF stream."""
 
 
-def decompress(data: bytes | bytearray | memoryview, expected_size: int) -> bytes:
+def decompress(data: bytes | bytearray | memoryview, expected_size: int, *, use_c: bool = True) -> bytes:
     """Decode an LZF stream into exactly ``expected_size`` bytes.
 
     Example:
         >>> decompress(bytes([2]) + b"abc" + bytes([0x20, 2]), 6)  # "abc" then copy 3 from 3 back
         b'abcabc'
     """
-    try:  # the C implementation, when installed (optional: pip install python-lzf)
-        import lzf  # type: ignore
+    if use_c:
+        try:  # the C implementation, when installed (optional: pip install python-lzf)
+            import lzf  # type: ignore
 
-        out = lzf.decompress(bytes(data), expected_size + 1)
-        if out is not None and len(out) == expected_size:
-            return out
-    except ImportError:
-        pass
+            out = lzf.decompress(bytes(data), expected_size + 1)
+            if out is not None and len(out) == expected_size:
+                return out
+        except ImportError:
+            pass
+        except ValueError:  # corrupt: let the Python decoder say where
+            pass
     src = bytes(data)
     n = len(src)
     out = bytearray()

@@ -8,7 +8,7 @@ decompresses to each field's values for all points in turn (structure of arrays)
 
 Fields understood: x y z; normal_x normal_y normal_z; rgb (packed in a float32, PCL's
 convention) or rgba (uint32); label. Points whose x, y or z is NaN (the holes of an
-organised depth image) are dropped and counted in ``dropped``.
+organised depth image) are kept here, in grid order; ``read_points`` drops and counts them.
 
 Reference: pointclouds.org, "The PCD (Point Cloud Data) file format".
 """
@@ -94,12 +94,12 @@ def _unique_names(dtypes):
 
 
 def read_pcd(path: str | os.PathLike) -> Payload:
-    """Points (NaN holes dropped), normals, colours and labels of a PCD file.
+    """Points (NaN holes included, in grid order), normals, colours and labels of a PCD file.
 
     Example:
         >>> payload = read_pcd("test0.pcd")  # doctest: +SKIP  (640 x 480 organised, binary_compressed)
-        >>> payload.dropped > 0  # doctest: +SKIP
-        True
+        >>> payload.points.shape  # doctest: +SKIP
+        (307200, 3)
     """
     path = Path(path)
     data = read_bytes(path)
@@ -152,14 +152,14 @@ def read_pcd(path: str | os.PathLike) -> Payload:
             if name in ("rgb", "rgba"):
                 # ASCII PCD writes packed colours as a float (rgb) or an integer (rgba)
                 vals = vals.astype(np.float32).view(np.uint32) if dt.kind == "f" else vals.astype(np.uint32)
+            else:  # the declared type: a float32 field printed in decimal reads back as that float32
+                vals = vals.astype(dt)
             columns[name] = vals[:, 0] if count == 1 else vals
             col += count
     for axis in "xyz":
         if axis not in columns:
             raise InputError(f"{path}: PCD FIELDS has no '{axis}'")
     points = np.stack([np.asarray(columns[a], dtype=np.float64) for a in "xyz"], axis=1)
-    keep = ~np.isnan(points).any(axis=1)
-    dropped = int(n - keep.sum())
     normals = colors = labels = None
     if all(k in columns for k in ("normal_x", "normal_y", "normal_z")):
         normals = np.stack([np.asarray(columns[k], dtype=np.float64) for k in ("normal_x", "normal_y", "normal_z")], axis=1)
@@ -174,11 +174,8 @@ def read_pcd(path: str | os.PathLike) -> Payload:
             break
     if "label" in columns:
         labels = np.asarray(columns["label"]).astype(np.int64)
-    if dropped:
-        points = points[keep]
-        normals = None if normals is None else normals[keep]
-        colors = None if colors is None else colors[keep]
-        labels = None if labels is None else labels[keep]
+    # NaN holes stay in: read_points drops them (its default for PCD) and counts them
+    dropped = 0
     return Payload(points, None, normals, colors, labels, dropped,
                    info={"format": f"pcd {mode}", "width": width, "height": height,
                          "fields": [d[0] for d in dtypes]})
