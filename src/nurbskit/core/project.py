@@ -183,19 +183,23 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_sl
 # ----------------------------------------------------------------------------------------
 # start points
 # ----------------------------------------------------------------------------------------
-def _nearest(samples: Tensor, points: Tensor, chunk: int) -> Tensor:
-    """Index ``(N,)`` of the nearest row of ``samples (G, dim)`` for each of ``points (N, dim)``."""
+def _nearest(samples: Tensor, points: Tensor, chunk: int, count: int = 1) -> Tensor:
+    """Indices ``(N, count)`` of the ``count`` nearest rows of ``samples (G, dim)`` to ``points (N, dim)``."""
+    count = min(count, samples.shape[0])
     if samples.device.type == "cpu":
         from scipy.spatial import cKDTree
 
         tree = cKDTree(samples.double().numpy())
-        _, idx = tree.query(points.double().numpy(), workers=max(1, torch.get_num_threads()))
-        return torch.as_tensor(idx, dtype=torch.int64)
+        _, idx = tree.query(points.double().numpy(), k=count, workers=max(1, torch.get_num_threads()))
+        return torch.as_tensor(idx, dtype=torch.int64).reshape(points.shape[0], count)
     # On accelerators a chunked brute force is one GEMM per chunk; the chunk keeps the
     # (rows, G) distance block near 2^24 entries.
     rows = max(1, min(chunk, (1 << 24) // max(1, samples.shape[0])))
-    out = [torch.cdist(points[i : i + rows], samples).argmin(dim=-1) for i in range(0, points.shape[0], rows)]
-    return torch.cat(out)
+    out = [
+        torch.cdist(points[i : i + rows], samples).topk(count, dim=-1, largest=False).indices
+        for i in range(0, points.shape[0], rows)
+    ]
+    return torch.cat(out) if out else torch.zeros(0, count, dtype=torch.int64, device=points.device)
 
 
 def _as_eval(t: Tensor, k: int) -> Tensor:
@@ -213,16 +217,15 @@ def _resolution(spline, grid) -> tuple[int, ...]:
     return res
 
 
-def _grid_starts(spline, points: Tensor, grid, chunk: int) -> tuple[Tensor, Tensor, Tensor]:
-    """Nearest grid sample, and for some points a second start.
+def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> tuple[Tensor, Tensor]:
+    """Start parameters for Newton: ``rows (E,)`` (indices into the points) and ``t0 (E, k)``.
 
-    Returns ``start (N, k)``, ``extra_rows (E,)`` indices into the points and
-    ``extra_start (E, k)``. Samples where the map degenerates (the pole of a sphere patch,
-    ``C_u = 0``) are saddles for Newton: the gradient along the collapsed direction
-    vanishes there, so Newton cannot leave them towards a boundary minimum nearby. A
-    point whose nearest sample is degenerate therefore also starts from its nearest
-    regular sample, and the better of the two results is kept (the degenerate point itself
-    may be the true foot point).
+    Each point starts from its ``starts`` nearest grid samples (the first ``N`` entries are
+    each point's nearest one, in order). Samples where the map degenerates (the pole of
+    a sphere patch, ``C_u = 0``) are saddles for Newton: the gradient along the collapsed
+    direction vanishes there, so Newton cannot leave them towards a boundary minimum
+    nearby. A point whose nearest sample is degenerate therefore also starts from its
+    nearest regular sample (the degenerate point itself may be the true foot point).
     """
     axes = spline.grid_axes(_resolution(spline, grid))
     k = spline.para_dim
@@ -236,13 +239,17 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int) -> tuple[Tensor, Tens
     gram = torch.linalg.det(J @ J.transpose(1, 2))
     regular = gram > 1e-12 * gram.max()
     x = points.detach().to(samples.dtype)
-    idx = _nearest(samples, x, chunk).to(table.device)
-    start = table[idx]
-    extra_rows = torch.nonzero(~regular[idx]).reshape(-1)
-    if extra_rows.numel() == 0 or not bool(regular.any()):
-        return start, extra_rows[:0], start[:0]
-    sub = _nearest(samples[regular], x[extra_rows], chunk).to(table.device)
-    return start, extra_rows, table[regular][sub]
+    n = x.shape[0]
+    idx = _nearest(samples, x, chunk, starts).to(table.device)  # (N, count)
+    own = torch.arange(n, device=table.device)
+    rows = [own] + [own] * (idx.shape[1] - 1)
+    t0 = [table[idx[:, 0]]] + [table[idx[:, j]] for j in range(1, idx.shape[1])]
+    degenerate = torch.nonzero(~regular[idx[:, 0]]).reshape(-1)
+    if degenerate.numel() and bool(regular.any()):
+        sub = _nearest(samples[regular], x[degenerate], chunk)[:, 0].to(table.device)
+        rows.append(degenerate)
+        t0.append(table[regular][sub])
+    return torch.cat(rows), torch.cat(t0)
 
 
 def nearest_grid_params(spline, points: Tensor, grid: int | Sequence[int] | None = None, chunk: int = 65536) -> Tensor:
@@ -259,7 +266,7 @@ def nearest_grid_params(spline, points: Tensor, grid: int | Sequence[int] | None
         torch.Size([10, 2])
     """
     with torch.no_grad():
-        return _grid_starts(spline.detach(), points, grid, chunk)[0]
+        return _grid_starts(spline.detach(), points, grid, chunk)[1][: points.shape[0]]
 
 
 # ----------------------------------------------------------------------------------------
@@ -270,6 +277,7 @@ def project_points(
     points,
     *,
     grid: int | Sequence[int] | None = None,
+    starts: int = 1,
     iterations: int = 32,
     tol: float | None = None,
     chunk: int = 65536,
@@ -283,6 +291,10 @@ def project_points(
             dtype and device.
         grid: samples per parametric direction for the start points (int or one per
             direction); default ``max(4 * n, 32)`` for ``n`` control points.
+        starts: refine from this many nearest grid samples per point and keep the closest
+            result. Newton finds the local minimum whose basin holds its start; far from a
+            curved surface (beyond its radius of curvature) two basins can nearly tie, and
+            more starts make picking the wrong one rarer, at ``starts`` times the cost.
         iterations: at most this many Newton iterations (each point stops on its own).
         tol: a point stops once its Newton step moves the foot point by less than
             ``tol`` times the diagonal of the control net's bounding box; default
@@ -321,6 +333,8 @@ def project_points(
         )
     if iterations < 0:
         raise NurbskitError(f"project_points: iterations must be >= 0, got {iterations}")
+    if starts < 1:
+        raise NurbskitError(f"project_points: starts must be >= 1, got {starts}")
     if chunk < 1:
         raise NurbskitError(f"project_points: chunk must be >= 1, got {chunk}")
     batch = x.shape[:-1]
@@ -338,18 +352,22 @@ def project_points(
         f_slack = 16 * eps * size * size
         params = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
         if flat.shape[0]:
-            start, rows, extra = _grid_starts(fixed, xd, grid, chunk)
-            starts = torch.cat([start, extra])
-            targets = torch.cat([xd, xd[rows]])
-            found = torch.empty_like(starts)
-            for i in range(0, starts.shape[0], chunk):
-                found[i : i + chunk] = _newton(fixed, starts[i : i + chunk], targets[i : i + chunk], iterations, tol_move, f_slack)
-            params = found[: flat.shape[0]]
-            if rows.numel():
-                # keep the better of the two starts (see _grid_starts)
-                fa = (fixed.evaluate(_as_eval(params[rows], k)) - xd[rows]).square().sum(-1)
-                fb = (fixed.evaluate(_as_eval(found[flat.shape[0] :], k)) - xd[rows]).square().sum(-1)
-                params[rows] = torch.where((fb < fa)[:, None], found[flat.shape[0] :], params[rows])
+            rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
+            targets = xd[rows]
+            found = torch.empty_like(starts_t)
+            for i in range(0, starts_t.shape[0], chunk):
+                found[i : i + chunk] = _newton(fixed, starts_t[i : i + chunk], targets[i : i + chunk], iterations, tol_move, f_slack)
+            params = found[: flat.shape[0]].clone()
+            if rows.numel() > flat.shape[0]:
+                # several starts for some points: keep the closest result
+                f = (fixed.evaluate(_as_eval(found, k)) - targets).square().sum(-1)
+                best = torch.full((flat.shape[0],), float("inf"), dtype=f.dtype, device=f.device)
+                best = best.scatter_reduce(0, rows, f, reduce="amin")
+                winner = torch.nonzero(f <= best[rows]).reshape(-1)
+                # ties: the earliest start wins, deterministically on every device
+                choice = torch.full((flat.shape[0],), rows.numel(), dtype=torch.int64, device=rows.device)
+                choice = choice.scatter_reduce(0, rows[winner], winner, reduce="amin")
+                params = found[choice]
     params = _as_eval(params, k)
     closest = spline.evaluate(params)
     distance = (flat - closest).norm(dim=-1)
@@ -365,6 +383,7 @@ def project_points_curve(
     points,
     *,
     grid: int | None = None,
+    starts: int = 1,
     iterations: int = 32,
     tol: float | None = None,
     chunk: int = 65536,
@@ -385,4 +404,4 @@ def project_points_curve(
     """
     if getattr(curve, "para_dim", None) != 1:
         raise NurbskitError(f"project_points_curve takes a NURBSCurve, got {type(curve).__name__}")
-    return project_points(curve, points, grid=grid, iterations=iterations, tol=tol, chunk=chunk)
+    return project_points(curve, points, grid=grid, starts=starts, iterations=iterations, tol=tol, chunk=chunk)
