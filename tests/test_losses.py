@@ -368,3 +368,9 @@ def test_module_errors():
         L.LaplacianLoss("grid")(torch.rand(4, 4, 3), torch.rand(4, 4, 3))
     with pytest.raises(NurbskitError, match="reduction"):
         L.ChamferLoss("none")
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    assert doctest.testmod(L, raise_on_error=False).failed == 0

@@ -186,3 +186,9 @@ def test_strip_seam_removes_up_to_degree_repeated_rows():
     periodic = torch.cat([net, net[:2]], 0)  # a periodic net of degree 2 wraps two rows
     assert torch.equal(metrics._strip_seam(periodic, -3, 2), net)
     assert torch.equal(metrics._strip_seam(net, -3, 2), net)  # nothing repeated: unchanged
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    assert doctest.testmod(metrics, raise_on_error=False).failed == 0

@@ -125,3 +125,9 @@ def test_property_distance_equals_brute_force_minimum(n, m, d, seed):
 def test_errors_name_the_problem(q, r, match):
     with pytest.raises(NurbskitError, match=match):
         nearest_neighbors(q, r)
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    assert doctest.testmod(neighbors, raise_on_error=False).failed == 0
