@@ -8,7 +8,7 @@ points ``(w * P, w)`` along that direction: a matrix ``T (n_new, n_old)`` that d
 only on the knot vector and the degree. The matrix is built once in float64 from the
 detached knots by running the curve algorithm of The NURBS Book (Piegl and Tiller) on
 the identity (A5.1 knot insertion, A5.4 knot refinement, A5.9 degree elevation), then
-applied along the axis with one ``tensordot``; the result is de-homogenised. So the
+applied along the axis as one matrix product; the result is de-homogenised. So the
 operations work for any parametric and spatial dimension, and the new control points
 and weights are differentiable with respect to the old ones (not with respect to the
 knots, whose new values are data built from the detached knots).
@@ -18,8 +18,9 @@ Convention:
 * ``value`` arguments live in the knot domain ``[a, b] = [knots[p], knots[n]]`` of the
   chosen direction; they are rounded to the knots' dtype before use, so the inserted
   knot is exactly the one the matrix was built for.
-* A knot may reach multiplicity ``p`` (the degree) by insertion, not more: interior
-  multiplicity ``p`` already makes the control polygon pass through the curve.
+* A knot may reach multiplicity ``p`` (the degree) by insertion, not more: at
+  multiplicity ``p`` a control point already lies on the object (C0 there); ``p + 1``
+  would cut it in two, which is what :func:`split` is for.
 * :func:`elevate_degree` and :func:`decompose_bezier` return clamped knot vectors in
   that direction (an unclamped direction is clamped at its domain first, which keeps
   the geometry on the domain).
@@ -81,7 +82,7 @@ def _knot_values(obj: TensorSpline, axis: int, values, op: str) -> np.ndarray:
     """``values`` as float64, rounded through the knots' dtype and checked to be finite."""
     kv = obj.knot_vectors[axis]
     try:
-        raw = torch.as_tensor(values.detach() if isinstance(values, Tensor) else values, dtype=torch.float64)
+        raw = torch.as_tensor(values.detach().cpu() if isinstance(values, Tensor) else values, dtype=torch.float64)
     except (TypeError, ValueError, RuntimeError):
         raise NurbskitError(f"{op}: knot values must be real numbers, got {values!r}") from None
     if raw.ndim > 1:
@@ -144,8 +145,8 @@ def _apply(obj: TensorSpline, axis: int, matrix: np.ndarray, knots: np.ndarray, 
     if degree is not None:
         degrees[axis] = int(degree)
     return obj._replace(
-        control_points=moved[..., :-1] / moved[..., -1:],
-        weights=moved[..., -1],
+        control_points=(moved[..., :-1] / moved[..., -1:]).contiguous(),
+        weights=moved[..., -1].contiguous(),
         knot_vectors=kvs,
         degrees=tuple(degrees),
     )
@@ -155,8 +156,9 @@ def _span(knots: np.ndarray, u: float) -> int:
     """The true span ``k`` with ``knots[k] <= u < knots[k + 1]`` (no clamping to the control net).
 
     At the end of an unclamped domain this is the span past the last control point,
-    which is what A5.1 / A5.4 need there; ``u < knots[-1]`` holds for every value the
-    callers let through (the multiplicity limit excludes the end of a clamped vector).
+    which is what A5.1 needs there (A5.4 clamps it to FindSpan's last span instead);
+    ``u < knots[-1]`` holds for every value the callers let through (the multiplicity
+    limit excludes the end of a clamped vector).
     """
     return int(np.searchsorted(knots, u, side="right")) - 1
 
