@@ -22,7 +22,7 @@ from .config import FitConfig
 from .init import initial_surface
 from .lstsq import alternate
 from .loop import Progress, Target, run_stage
-from .params import SurfaceParameters, new_surface
+from .params import SurfaceParameters, Topology, new_surface
 from .pipelines import get_pipeline, supervised_default
 
 Tensor = torch.Tensor
@@ -43,7 +43,7 @@ class FitResult:
     surface: NURBSSurface
     config: FitConfig
     points: Tensor
-    closed_v: bool
+    topology: Topology
     history: list[dict] = field(default_factory=list)
     alternation: list[float] = field(default_factory=list)
     seconds: float = 0.0
@@ -53,6 +53,10 @@ class FitResult:
     scale: float = 1.0
     target_grid: Tensor | None = None
     initial_surface: NURBSSurface | None = None
+
+    @property
+    def closed_v(self) -> bool:
+        return self.topology.closed_v
 
     @property
     def seconds_per_iteration(self) -> float:
@@ -181,9 +185,9 @@ def fit_surface(
         lo_n, hi_n = xn.min(0).values, xn.max(0).values
         r = torch.rand(ctrl[0], ctrl[1], 3, generator=gen, dtype=dtype).to(device)
         surface = new_surface(lo_n + (hi_n - lo_n) * r, degree, False, kvs, weights)
-        closed_v = False
+        topology = Topology()
     else:
-        surface, closed_v = initial_surface(
+        surface, topology = initial_surface(
             xn, cfg.init.kind, ctrl, degree, cfg.init.closed, cfg.init.smoothness, generator=gen
         )
     init = surface
@@ -191,10 +195,10 @@ def fit_surface(
     alternation: list[float] = []
     if cfg.alternation.rounds and not cfg.supervised:
         surface, _, alternation = alternate(
-            surface, xn, cfg.alternation.rounds, closed_v, cfg.alternation.smoothness, cfg.alternation.tolerance
+            surface, xn, cfg.alternation.rounds, topology, cfg.alternation.smoothness, cfg.alternation.tolerance
         )
 
-    params = SurfaceParameters(surface, closed_v).to(device)
+    params = SurfaceParameters(surface, topology).to(device)
     history: list[dict] = []
     t_loop = time.perf_counter()
     for i, stage in enumerate(cfg.stages):
@@ -209,7 +213,7 @@ def fit_surface(
         surface=out,
         config=cfg,
         points=pts,
-        closed_v=closed_v,
+        topology=topology,
         history=history,
         alternation=alternation,
         seconds=time.perf_counter() - t0,

@@ -11,7 +11,8 @@
 * :func:`initial_surface` picks one by name; ``auto`` means least squares, with the
   topology from :func:`looks_closed`.
 
-All functions take ``points (N, 3)`` and return ``(surface, closed_v)``; dtype and
+All functions take ``points (N, 3)`` and return ``(surface, topology)`` (a
+:class:`~nurbskit.fit.params.Topology`: seam closed in v, pole rows); dtype and
 device follow ``points``. Randomness only comes from the ``generator`` argument.
 """
 
@@ -25,7 +26,7 @@ import torch
 from ..core import NURBSSurface
 from ..errors import OptionError
 from .lstsq import solve_control_points
-from .params import new_surface, periodic_knots
+from .params import Topology, new_surface, periodic_knots
 
 Tensor = torch.Tensor
 
@@ -145,15 +146,15 @@ def _grid(n: int, dtype, device) -> Tensor:
     return torch.linspace(0.0, 1.0, n, dtype=dtype, device=device)
 
 
-def random_surface(points: Tensor, ctrl, degree, generator: torch.Generator | None = None) -> tuple[NURBSSurface, bool]:
+def random_surface(points: Tensor, ctrl, degree, generator: torch.Generator | None = None) -> tuple[NURBSSurface, Topology]:
     """Control points uniform in the bounding box of ``points``; open, clamped uniform knots."""
     lo, hi = points.min(dim=0).values, points.max(dim=0).values
     r = torch.rand(ctrl[0], ctrl[1], points.shape[-1], generator=generator, dtype=points.dtype, device="cpu")
     cp = lo + (hi - lo) * r.to(points.device)
-    return new_surface(cp, degree, closed_v=False), False
+    return new_surface(cp, degree, closed_v=False), Topology()
 
 
-def plane_sheet(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, bool]:
+def plane_sheet(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, Topology]:
     """A flat control net on the best-fitting plane over the projected points' rectangle."""
     _, center, axes = plane_parameters(points)
     xy = (points - center) @ axes[:2].T
@@ -161,10 +162,10 @@ def plane_sheet(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, bool]:
     a = lo[0] + (hi[0] - lo[0]) * _grid(ctrl[0], points.dtype, points.device)
     b = lo[1] + (hi[1] - lo[1]) * _grid(ctrl[1], points.dtype, points.device)
     cp = center + a[:, None, None] * axes[0] + b[None, :, None] * axes[1]
-    return new_surface(cp, degree, closed_v=False), False
+    return new_surface(cp, degree, closed_v=False), Topology()
 
 
-def cylinder_cage(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, bool]:
+def cylinder_cage(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, Topology]:
     """A cylinder around the principal axis enclosing the points, closed in v.
 
     The control rows span the points' extent along the axis; the radius is the
@@ -188,23 +189,52 @@ def cylinder_cage(points: Tensor, ctrl, degree) -> tuple[NURBSSurface, bool]:
     ring = torch.cos(angle)[:, None] * axes[1] + torch.sin(angle)[:, None] * axes[2]  # (m, 3)
     cp = center + heights[:, None, None] * axes[0] + radius * ring[None]
     cp = torch.cat([cp, cp[:, :q]], dim=1)
-    return new_surface(cp, degree, closed_v=True), True
+    return new_surface(cp, degree, closed_v=True), Topology(closed_v=True)
+
+
+def closed_ends(points: Tensor, params: Tensor, ratio: float = 0.6, slab: float = 0.05) -> tuple[bool, bool]:
+    """Whether a cylinder-parametrised cloud closes at its ends (``u = 0`` and ``u = 1``).
+
+    An end is closed (a pole) when the points in its last ``slab`` of height spread
+    less than ``ratio`` times the widest cross-section around the axis.
+    """
+    center, axes = cylinder_frame(points)
+    rel = points - center
+    radial = (rel - (rel @ axes[0])[:, None] * axes[0]).norm(dim=-1)
+    u = params[:, 0]
+    widest = radial.max()
+    out = []
+    for sel in (u <= slab, u >= 1 - slab):
+        if sel.sum() < 3:
+            out.append(True)
+            continue
+        xy = rel[sel] @ axes[1:].T
+        spread = (xy - xy.mean(0)).norm(dim=-1).max()
+        out.append(bool(spread < ratio * widest))
+    return out[0], out[1]
 
 
 def least_squares_surface(
-    points: Tensor, ctrl, degree, closed_v: bool, smoothness: float = 1e-3
-) -> tuple[NURBSSurface, bool]:
-    """Least-squares surface from a plane (open) or cylinder (closed) parametrisation."""
+    points: Tensor, ctrl, degree, closed_v: bool, smoothness: float = 1e-3, poles: bool = True
+) -> tuple[NURBSSurface, Topology]:
+    """Least-squares surface from a plane (open) or cylinder (closed) parametrisation.
+
+    A closed cloud whose ends close up (:func:`closed_ends`) gets pole rows, so the
+    surface closes there instead of flaring out where data is sparse.
+    """
     if closed_v:
         params, _, _ = cylinder_parameters(points)
         template, _ = cylinder_cage(points, ctrl, degree)
+        start, end = closed_ends(points, params) if poles else (False, False)
+        topo = Topology(closed_v=True, pole_start=start, pole_end=end)
     else:
         params, _, _ = plane_parameters(points)
         template, _ = plane_sheet(points, ctrl, degree)
+        topo = Topology()
     cp = solve_control_points(
-        params, points, template.knot_vectors, template.degrees, template.sizes, None, closed_v, smoothness
+        params, points, template.knot_vectors, template.degrees, template.sizes, None, topo, smoothness
     )
-    return template._replace(control_points=cp), closed_v
+    return template._replace(control_points=cp), topo
 
 
 def initial_surface(
@@ -215,14 +245,14 @@ def initial_surface(
     closed: str = "auto",
     smoothness: float = 1e-3,
     generator: torch.Generator | None = None,
-) -> tuple[NURBSSurface, bool]:
-    """The initial surface by name (see the module docstring) and whether it is closed in v.
+) -> tuple[NURBSSurface, Topology]:
+    """The initial surface by name (see the module docstring) and its topology.
 
     Example:
         >>> import torch
         >>> pts = torch.rand(500, 3, dtype=torch.float64) * torch.tensor([1.0, 1.0, 0.05], dtype=torch.float64)
-        >>> surface, closed = initial_surface(pts, "auto", (6, 6), (3, 3))
-        >>> surface.sizes, closed
+        >>> surface, topology = initial_surface(pts, "auto", (6, 6), (3, 3))
+        >>> surface.sizes, topology.closed_v
         ((6, 6), False)
     """
     if closed not in ("auto", "open", "v"):

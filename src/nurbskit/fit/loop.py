@@ -76,6 +76,10 @@ class Progress:
     parts: dict[str, float] = field(default_factory=dict)
 
 
+class NonFiniteSurface(ArithmeticError):
+    """The surface evaluated to NaN or infinity (a too-long optimiser step)."""
+
+
 @dataclass
 class _State:
     """What persists between iterations of a stage (matching, foot points)."""
@@ -109,7 +113,7 @@ def stage_loss(
     surface = params()
     closed_v = params.closed_v
     if stage.eliminate_control_points:
-        surface = surface._replace(control_points=eliminated_control_points(surface, target, closed_v))
+        surface = surface._replace(control_points=eliminated_control_points(surface, target, params.topology))
     needs_grid = any(
         getattr(w, k) for k in ("l2", "chamfer", "hausdorff", "coverage")
     ) or (w.laplacian and (target.supervised or w.laplacian_on == "grid"))
@@ -119,13 +123,13 @@ def stage_loss(
         gu, gv = surface.grid_axes(resolution)
         grid = surface.evaluate_grid(gu, gv)
         flat = grid.reshape(-1, grid.shape[-1])
+        if not torch.isfinite(flat.detach()).all():
+            raise NonFiniteSurface()
     x = target.points
     if w.l2:
         if target.supervised:
             ordered = target.grid.reshape(-1, x.shape[-1])
         elif stage.rematch_every:
-            if state.matched is None or iteration % stage.rematch_every == 0:
-                state.matched = one_to_one_matching(flat, x)
             ordered = x[state.matched]
         else:
             if x.shape[0] < flat.shape[0]:
@@ -152,14 +156,6 @@ def stage_loss(
             cp = surface.control_points[:, : params.n_v - params.degrees[1]] if closed_v else surface.control_points
             parts["laplacian"] = L.laplacian_control(cp, closed_v=closed_v, boundary=w.laplacian_boundary)
     if w.point_to_surface:
-        if state.foot is None or iteration % max(stage.reproject_every, 1) == 0:
-            fixed = surface.detach()
-            if state.foot is None or iteration % (10 * max(stage.reproject_every, 1)) == 0:
-                from ..core.project import project_points
-
-                state.foot = project_points(fixed, x).params
-            else:
-                state.foot = foot_points(fixed, x, state.foot, closed_v, iterations=3)
         closest = surface.evaluate(state.foot)
         parts["point_to_surface"] = (closest - x).square().sum(-1).mean()
     if w.coverage:
@@ -172,6 +168,40 @@ def stage_loss(
     return total, {k: float(v.detach()) for k, v in parts.items()}
 
 
+def refresh_state(
+    params: SurfaceParameters, stage: StageConfig, target: Target, resolution: tuple[int, int], state: _State, iteration: int
+) -> None:
+    """Update what a step holds fixed: the UM matching and the foot points of the inputs.
+
+    Called before each optimiser step, so that every loss evaluation of that step (an
+    L-BFGS line search makes several) sees the same objective.
+    """
+    w = stage.loss
+    if not (w.point_to_surface or (w.l2 and stage.rematch_every and not target.supervised)):
+        return
+    with torch.no_grad():
+        surface = params().detach()
+        if not (torch.isfinite(surface.control_points).all() and torch.isfinite(surface.weights).all()):
+            raise OptionError(f"stage {stage.name}: the surface became NaN or infinite; lower the learning rate (lr={stage.lr})")
+        if w.l2 and stage.rematch_every and not target.supervised:
+            if state.matched is None or iteration % stage.rematch_every == 0:
+                flat = surface.sample(resolution).reshape(-1, target.points.shape[-1])
+                state.matched = one_to_one_matching(flat, target.points)
+        if w.point_to_surface:
+            every = max(stage.reproject_every, 1)
+            if state.foot is None:
+                from ..core.project import project_points
+
+                state.foot = project_points(surface, target.points).params
+            elif iteration % every == 0:
+                # Warm start from the last foot points, restarted from the nearest grid
+                # sample every few steps (a foot point can jump to another part of the surface).
+                state.foot = foot_points(
+                    surface, target.points, state.foot, params.closed_v, iterations=3,
+                    restart=iteration % (5 * every) == 0,
+                )
+
+
 def grid_parameters(surface, resolution: tuple[int, int]) -> Tensor:
     """The ``(R * S, 2)`` parameters of the uniform grid, u slowest (``surface.sample`` order)."""
     gu, gv = surface.grid_axes(resolution)
@@ -179,14 +209,14 @@ def grid_parameters(surface, resolution: tuple[int, int]) -> Tensor:
     return torch.stack([uu.reshape(-1), vv.reshape(-1)], dim=-1)
 
 
-def eliminated_control_points(surface, target: Target, closed_v: bool) -> Tensor:
+def eliminated_control_points(surface, target: Target, topology) -> Tensor:
     """Least-squares control points for a supervised grid target at the surface's knots and weights."""
     if not target.supervised:
         raise OptionError("eliminate_control_points needs a supervised (ordered grid) target")
     uv = grid_parameters(surface, tuple(target.grid.shape[:2]))
     return solve_control_points(
         uv, target.grid.reshape(-1, target.grid.shape[-1]), surface.knot_vectors, surface.degrees,
-        surface.sizes, surface.weights, closed_v,
+        surface.sizes, surface.weights, topology,
     )
 
 
@@ -228,21 +258,31 @@ def run_stage(
     state = _State()
     for it in range(stage.iters):
         record: dict = {}
+        refresh_state(params, stage, target, resolution, state, it)
 
         def closure():
             opt.zero_grad(set_to_none=True)
-            loss, parts = stage_loss(params, stage, target, resolution, state, it)
+            try:
+                loss, parts = stage_loss(params, stage, target, resolution, state, it)
+            except NonFiniteSurface:
+                loss, parts = None, {}
+            if loss is None or not torch.isfinite(loss.detach()):
+                if stage.optimizer != "lbfgs" or not record:
+                    raise OptionError(
+                        f"stage {stage.name}: the surface became NaN or infinite at iteration {it}; "
+                        f"lower the learning rate (lr={stage.lr})"
+                    )
+                # Inside an L-BFGS line search: a huge loss with zero gradient makes the
+                # search shorten its step instead of failing.
+                for t in tensors:
+                    t.grad = torch.zeros_like(t)
+                return torch.tensor(1e30, dtype=tensors[0].dtype, device=tensors[0].device)
             loss.backward()
             if not record:
                 record.update(loss=float(loss.detach()), parts=parts)
             return loss
 
         opt.step(closure)
-        if not math.isfinite(record["loss"]):
-            raise OptionError(
-                f"stage {stage.name}: the loss became {record['loss']} at iteration {it}; "
-                f"lower the learning rate (lr={stage.lr})"
-            )
         history.append({"stage": stage.name, "iteration": it, **record})
         if callback is not None:
             callback(Progress(stage.name, stage_index, it, stage.iters, record["loss"], record["parts"]))
@@ -251,7 +291,7 @@ def run_stage(
     if stage.eliminate_control_points:
         with torch.no_grad():
             surface = params()
-            params.load_control_points(eliminated_control_points(surface, target, params.closed_v))
+            params.load_control_points(eliminated_control_points(surface, target, params.topology))
     if stage.train_knots:
         params.freeze_knots()
     return history

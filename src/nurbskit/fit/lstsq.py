@@ -27,9 +27,13 @@ import torch
 
 from ..core import NURBSSurface
 from ..core.basis import basis_matrix
-from .params import fold_columns, wrap_columns
+from .params import Topology, expand
 
 Tensor = torch.Tensor
+
+
+def _topology(topology) -> Topology:
+    return Topology(closed_v=topology) if isinstance(topology, bool) else (topology or Topology())
 
 
 def design_matrix(
@@ -38,14 +42,15 @@ def design_matrix(
     degrees: Sequence[int],
     sizes: Sequence[int],
     weights: Tensor | None = None,
-    closed_v: bool = False,
-) -> Tensor:
-    """Rational basis values of every point for every (distinct) control point.
+    topology: Topology | bool | None = None,
+) -> tuple[Tensor, Tensor, int]:
+    """Rational basis values of every point for every free control point.
 
-    Shapes: ``params (M, 2)`` -> ``(M, n_u * n_free_v)`` with ``n_free_v = n_v - q``
-    when ``closed_v`` (wrapped columns folded onto the first ones), else ``n_v``.
-    Column ``i * n_free_v + j`` belongs to control point ``(i, j)``.
+    Shapes: ``params (M, 2)`` -> ``(A (M, k), index (n_u * n_v,), k)``: ``k`` free
+    unknowns after the ties of ``topology`` (periodic seam, pole rows), ``index`` maps
+    each control point (u-major) to its unknown.
     """
+    topo = _topology(topology)
     n_u, n_v = sizes
     bu = basis_matrix(knot_vectors[0], degrees[0], n_u, params[:, 0])  # (M, n_u)
     bv = basis_matrix(knot_vectors[1], degrees[1], n_v, params[:, 1])  # (M, n_v)
@@ -53,16 +58,16 @@ def design_matrix(
     if weights is not None:
         a = a * weights
         a = a / a.sum(dim=(1, 2), keepdim=True)
-    if closed_v:
-        a = fold_columns(a, n_v - degrees[1])
-    return a.reshape(a.shape[0], -1)
+    index, k = topo.index(n_u, n_v, degrees[1], device=params.device)
+    a = a.reshape(a.shape[0], -1)
+    return a.new_zeros(a.shape[0], k).index_add(1, index, a), index, k
 
 
 def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None, device=None) -> Tensor:
     """Second-difference operator of a control net, ``(rows, n_u * n_v)``.
 
     Rows ``P[i-1, j] - 2 P[i, j] + P[i+1, j]`` along u and the same along v (with
-    wrap-around when ``closed_v``).
+    wrap-around when ``closed_v``; ``n_v`` then counts the distinct columns).
     """
     rows = []
     idx = torch.arange(n_u * n_v, device=device).reshape(n_u, n_v)
@@ -92,15 +97,15 @@ def solve_control_points(
     degrees: Sequence[int],
     sizes: Sequence[int],
     weights: Tensor | None = None,
-    closed_v: bool = False,
+    topology: Topology | bool | None = None,
     smoothness: float = 0.0,
 ) -> Tensor:
     """Least-squares control points for points at known parameters.
 
     Shapes: ``params (M, 2)``, ``points (M, dim)`` -> ``(n_u, n_v, dim)`` (the full net,
-    wrapped columns included when ``closed_v``). ``smoothness`` is relative (see the
-    module docstring); with ``smoothness=0`` and enough well-spread points the fit
-    reproduces any surface of the same knots and weights exactly.
+    respecting the ties of ``topology``; a bool means ``closed_v``). ``smoothness`` is
+    relative (see the module docstring); with ``smoothness=0`` and enough well-spread
+    points the fit reproduces any surface of the same knots and weights exactly.
 
     Example:
         >>> import torch
@@ -111,22 +116,24 @@ def solve_control_points(
         >>> bool(torch.allclose(P, s.control_points))
         True
     """
+    topo = _topology(topology)
     n_u, n_v = sizes
-    A = design_matrix(params, knot_vectors, degrees, sizes, weights, closed_v)
-    n_free_v = n_v - degrees[1] if closed_v else n_v
+    A, index, k = design_matrix(params, knot_vectors, degrees, sizes, weights, topo)
     AtA = A.T @ A
     rhs = A.T @ points
     trace = torch.diagonal(AtA).sum().detach()
-    n = AtA.shape[0]
     if smoothness > 0:
-        D = second_differences(n_u, n_free_v, closed_v, dtype=A.dtype, device=A.device)
+        m = n_v - degrees[1] if topo.closed_v else n_v
+        D = second_differences(n_u, m, topo.closed_v, dtype=A.dtype, device=A.device)
+        first = index.reshape(n_u, n_v)[:, :m].reshape(-1)
+        D = D.new_zeros(D.shape[0], k).index_add(1, first, D)
         DtD = D.T @ D
         lam = smoothness * trace / torch.diagonal(DtD).sum().clamp_min(1e-30)
         AtA = AtA + lam * DtD
     # A whisper of ridge keeps control points with no data nearby determined.
-    AtA = AtA + (1e-12 * trace / n) * torch.eye(n, dtype=A.dtype, device=A.device)
-    P = torch.linalg.solve(AtA, rhs).reshape(n_u, n_free_v, -1)
-    return wrap_columns(P, degrees[1]) if closed_v else P
+    AtA = AtA + (1e-12 * trace / k) * torch.eye(k, dtype=A.dtype, device=A.device)
+    P = torch.linalg.solve(AtA, rhs)
+    return expand(P, index, n_u, n_v)
 
 
 def foot_points(
@@ -136,16 +143,25 @@ def foot_points(
     closed_v: bool = False,
     iterations: int = 6,
     grid: int = 48,
+    restart: bool = False,
 ) -> Tensor:
     """Parameters of the closest surface points (no gradient).
 
     Shapes: ``points (N, 3)``, optional starting ``params (N, 2)`` -> ``(N, 2)``.
     Starts from the nearest sample of a ``grid x grid`` parametric grid (or from
     ``params``), then damped Gauss-Newton steps on ``|S(u, v) - x|^2``, clamped to the
-    domain (wrapped along a closed v). Used by the alternation, where only the foot
+    domain (wrapped along a closed v). With ``params`` and ``restart=True`` both starts
+    are refined and the closer result is kept per point. Used by the alternation, where only the foot
     parameters matter; :func:`nurbskit.core.project.project_points` is the public
     projection with envelope-theorem gradients.
     """
+    if restart and params is not None:
+        a = foot_points(surface, points, params, closed_v, iterations, grid)
+        b = foot_points(surface, points, None, closed_v, iterations, grid)
+        with torch.no_grad():
+            da = (surface.evaluate(a) - points).square().sum(-1)
+            db = (surface.evaluate(b) - points).square().sum(-1)
+            return torch.where((db < da).unsqueeze(-1), b, a)
     with torch.no_grad():
         (u0, u1), (v0, v1) = surface.domain
         if params is None:
@@ -191,7 +207,7 @@ def alternate(
     surface: NURBSSurface,
     points: Tensor,
     rounds: int,
-    closed_v: bool = False,
+    topology: Topology | bool | None = None,
     smoothness: float = 1e-3,
     tolerance: float = 1e-7,
     params: Tensor | None = None,
@@ -203,10 +219,12 @@ def alternate(
     distance after each round). Knots and weights stay as they are. Stops early when
     a round improves the mean squared distance by less than ``tolerance``.
     """
+    topo = _topology(topology)
+    closed_v = topo.closed_v
     history: list[float] = []
     with torch.no_grad():
         for k in range(rounds):
-            params = foot_points(surface, points, params if k > 0 else None, closed_v)
+            params = foot_points(surface, points, params if k > 0 else None, closed_v, iterations=6 if k == 0 else 3)
             err = float((surface.evaluate(params) - points).square().sum(-1).mean())
             history.append(err)
             if callback is not None:
@@ -215,7 +233,7 @@ def alternate(
                 break
             cp = solve_control_points(
                 params, points, surface.knot_vectors, surface.degrees, surface.sizes,
-                surface.weights, closed_v, smoothness,
+                surface.weights, topo, smoothness,
             )
             surface = surface._replace(control_points=cp)
         if rounds > 0:

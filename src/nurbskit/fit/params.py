@@ -17,6 +17,8 @@ Convention: control points ``(n_u, n_v, dim)`` with u on the first axis, as in t
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from ..core import NURBSSurface
@@ -45,25 +47,62 @@ def wrap_columns(free: Tensor, degree: int) -> Tensor:
     return torch.cat([free, free[:, :degree]], dim=1)
 
 
-def fold_columns(matrix: Tensor, n_free: int) -> Tensor:
-    """Fold basis columns of wrapped control points onto the distinct ones.
+@dataclass(frozen=True)
+class Topology:
+    """How the control net is tied together.
 
-    Shapes: ``(..., n_free + q)`` -> ``(..., n_free)``; used by least squares on
-    closed surfaces (column ``n_free + j`` is the same control point as column ``j``).
+    ``closed_v``: the last ``q`` columns repeat the first ``q`` (periodic seam);
+    ``pole_start`` / ``pole_end``: the first / last row is one point (a closed end, like
+    the poles of a sphere or the duck's tail and beak).
     """
-    out = matrix[..., :n_free].clone()
-    extra = matrix.shape[-1] - n_free
-    out[..., :extra] += matrix[..., n_free:]
-    return out
+
+    closed_v: bool = False
+    pole_start: bool = False
+    pole_end: bool = False
+
+    def index(self, n_u: int, n_v: int, q: int, device=None) -> tuple[Tensor, int]:
+        """``(n_u * n_v,)`` index of each control point's free unknown, and the unknown count.
+
+        Control point ``(i, j)`` (u-major) equals free unknown ``index[i * n_v + j]``.
+        """
+        m = n_v - q if self.closed_v else n_v
+        canon = {}
+        index = []
+        for i in range(n_u):
+            for j in range(n_v):
+                jj = j % m
+                if (i == 0 and self.pole_start) or (i == n_u - 1 and self.pole_end):
+                    jj = 0
+                key = (i, jj)
+                if key not in canon:
+                    canon[key] = len(canon)
+                index.append(canon[key])
+        return torch.tensor(index, dtype=torch.int64, device=device), len(canon)
+
+    def as_dict(self) -> dict:
+        return {"closed_v": self.closed_v, "pole_start": self.pole_start, "pole_end": self.pole_end}
+
+
+def expand(free: Tensor, index: Tensor, n_u: int, n_v: int) -> Tensor:
+    """Free unknowns ``(k, ...)`` -> the full net ``(n_u, n_v, ...)`` through ``index``."""
+    return free[index].reshape((n_u, n_v) + tuple(free.shape[1:]))
+
+
+def reduce(full: Tensor, index: Tensor, k: int) -> Tensor:
+    """The full net ``(n_u, n_v, ...)`` -> free unknowns ``(k, ...)``, averaging tied entries."""
+    flat = full.reshape((-1,) + tuple(full.shape[2:]))
+    out = flat.new_zeros((k,) + tuple(flat.shape[1:])).index_add(0, index, flat)
+    count = flat.new_zeros(k).index_add(0, index, flat.new_ones(flat.shape[0]))
+    return out / count.reshape((k,) + (1,) * (flat.ndim - 1))
 
 
 class SurfaceParameters(torch.nn.Module):
     """Trainable control points, log-weights and knot logits of one surface.
 
     Args:
-        surface: the starting surface; a closed one must already be periodic in v
-            (its last ``q`` control columns equal to the first ``q``).
-        closed_v: keep the surface closed in v.
+        surface: the starting surface; its net must already respect ``topology``
+            (periodic seam, collapsed pole rows).
+        topology: how the net is tied (:class:`Topology`); a bool means ``closed_v``.
         train_control_points, train_weights, train_knots: which tensors require grad.
 
     Example:
@@ -77,24 +116,28 @@ class SurfaceParameters(torch.nn.Module):
     def __init__(
         self,
         surface: NURBSSurface,
-        closed_v: bool = False,
+        topology: "Topology | bool" = False,
         *,
         train_control_points: bool = True,
         train_weights: bool = False,
         train_knots: bool = False,
     ):
         super().__init__()
+        if isinstance(topology, bool):
+            topology = Topology(closed_v=topology)
+        self.topology = topology
         p, q = surface.degrees
         self.degrees = (p, q)
-        self.closed_v = bool(closed_v)
+        self.closed_v = topology.closed_v
         self.n_u, self.n_v = surface.sizes
-        cp = surface.control_points.detach()
-        w = surface.weights.detach()
-        if self.closed_v:
-            cp, w = cp[:, : self.n_v - q], w[:, : self.n_v - q]
+        index, k = topology.index(self.n_u, self.n_v, q, device=surface.device)
+        self.register_buffer("index", index)
+        self.n_free = k
+        cp = reduce(surface.control_points.detach(), index, k)
+        w = reduce(surface.weights.detach(), index, k)
         self.control_points = torch.nn.Parameter(cp.clone(memory_format=torch.contiguous_format))
         self.log_weights = torch.nn.Parameter(torch.log(w).clone(memory_format=torch.contiguous_format))
-        ku, kv = (k.detach() for k in surface.knot_vectors)
+        ku, kv = (kk.detach() for kk in surface.knot_vectors)
         self.domains = [surface.domain[0], surface.domain[1]]
         self.knot_logits_u = torch.nn.Parameter(knots_to_logits(ku, p, self.n_u).clone())
         self.register_buffer("fixed_knots_u", ku.clone())
@@ -130,12 +173,10 @@ class SurfaceParameters(torch.nn.Module):
             self.fixed_knots_v.copy_(kv)
 
     def full_control_points(self) -> Tensor:
-        cp = self.control_points
-        return wrap_columns(cp, self.degrees[1]) if self.closed_v else cp
+        return expand(self.control_points, self.index, self.n_u, self.n_v)
 
     def full_weights(self) -> Tensor:
-        w = torch.exp(self.log_weights)
-        return wrap_columns(w, self.degrees[1]) if self.closed_v else w
+        return expand(torch.exp(self.log_weights), self.index, self.n_u, self.n_v)
 
     def forward(self) -> NURBSSurface:
         """The current surface (differentiable in every trainable tensor)."""
@@ -144,12 +185,9 @@ class SurfaceParameters(torch.nn.Module):
         )
 
     def load_control_points(self, control_points: Tensor) -> None:
-        """Replace the control points (full ``(n_u, n_v, dim)`` or distinct columns)."""
+        """Replace the control points from a full ``(n_u, n_v, dim)`` net."""
         with torch.no_grad():
-            cp = control_points
-            if self.closed_v and cp.shape[1] == self.n_v:
-                cp = cp[:, : self.n_v - self.degrees[1]]
-            self.control_points.copy_(cp)
+            self.control_points.copy_(reduce(control_points, self.index, self.n_free))
 
     def surface(self) -> NURBSSurface:
         """A detached, validated copy of the current surface."""

@@ -1,0 +1,144 @@
+"""Figures of a surface fit (matplotlib, Agg backend, loaded on first use).
+
+* :func:`plot_wireframe`: the output as a wireframe of its parametric grid (the
+  thesis's way of showing point order, section 5.1.1);
+* :func:`plot_clouds`: input and output clouds with the control net;
+* :func:`plot_error_map`: every input point coloured by its distance to the surface;
+* :func:`plot_loss`: the loss curve of the fitting loop, stage by stage.
+
+Every function takes plain arrays (numpy or torch), writes one PNG atomically and
+returns its path. Nothing is shown on screen.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .._fs import atomic_path
+from .._optional import require
+
+MAX_SCATTER = 20000
+
+
+def _figure(figsize):
+    """A pyplot-free Figure rendered by Agg: no global backend or state is touched."""
+    require("matplotlib", "dev", "figures")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _np(x) -> np.ndarray:
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().double().numpy()
+    return np.asarray(x, dtype=np.float64)
+
+
+def _subsample(x: np.ndarray, n: int = MAX_SCATTER) -> np.ndarray:
+    if len(x) <= n:
+        return x
+    idx = np.linspace(0, len(x) - 1, n).astype(int)
+    return x[idx]
+
+
+def _equal_axes(ax, pts: np.ndarray) -> None:
+    lo, hi = pts.min(0), pts.max(0)
+    c, r = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
+    ax.set_xlim(c[0] - r, c[0] + r)
+    ax.set_ylim(c[1] - r, c[1] + r)
+    ax.set_zlim(c[2] - r, c[2] + r)
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_zlabel("z")
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    return path
+
+
+def plot_wireframe(grid, path: str | os.PathLike, title: str = "output grid") -> Path:
+    """The ``(R, S, 3)`` grid as a wireframe: lines follow u and v (point order)."""
+    g = _np(grid)
+    fig = _figure((6, 6))
+    ax = fig.add_subplot(111, projection="3d")
+    ax.plot_wireframe(g[..., 0], g[..., 1], g[..., 2], color="tab:green", linewidth=0.5)
+    _equal_axes(ax, g.reshape(-1, 3))
+    ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_clouds(points, output, control_points, path: str | os.PathLike, title: str = "input, output and control net") -> Path:
+    """Input ``(N, 3)`` in blue, output samples ``(M, 3)`` in green, control net ``(n_u, n_v, 3)`` in red."""
+    x, y, c = _subsample(_np(points)), _subsample(_np(output).reshape(-1, 3)), _np(control_points)
+    fig = _figure((12, 6))
+    for k, (elev, azim) in enumerate(((25, -60), (25, 30))):
+        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
+        ax.scatter(x[:, 0], x[:, 1], x[:, 2], s=1, c="tab:blue", alpha=0.5, label="input")
+        ax.scatter(y[:, 0], y[:, 1], y[:, 2], s=1, c="tab:green", alpha=0.5, label="output")
+        ax.plot_wireframe(c[..., 0], c[..., 1], c[..., 2], color="tab:red", linewidth=0.6)
+        ax.scatter(c[..., 0].ravel(), c[..., 1].ravel(), c[..., 2].ravel(), s=6, c="tab:red", label="control net")
+        _equal_axes(ax, np.vstack([x, c.reshape(-1, 3)]))
+        ax.view_init(elev=elev, azim=azim)
+        if k == 0:
+            ax.legend(loc="upper left", markerscale=4)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def plot_error_map(points, distances, path: str | os.PathLike, scale: float = 1.0,
+                   title: str = "distance of each input point to the surface") -> Path:
+    """Input points coloured by ``distances (N,)`` divided by ``scale`` (e.g. the bbox diagonal)."""
+    x = _np(points)
+    d = _np(distances) / scale
+    idx = np.arange(len(x)) if len(x) <= MAX_SCATTER else np.linspace(0, len(x) - 1, MAX_SCATTER).astype(int)
+    x, d = x[idx], d[idx]
+    fig = _figure((7, 6))
+    ax = fig.add_subplot(111, projection="3d")
+    sc = ax.scatter(x[:, 0], x[:, 1], x[:, 2], s=3, c=d, cmap="viridis", vmin=0, vmax=max(np.percentile(d, 99), 1e-12))
+    fig.colorbar(sc, ax=ax, shrink=0.7, label="distance / bounding-box diagonal" if scale != 1.0 else "distance")
+    _equal_axes(ax, x)
+    ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_loss(history: Sequence[dict], path: str | os.PathLike, alternation: Sequence[float] = (),
+              title: str = "loss") -> Path:
+    """The loss per iteration (log scale); stages in different colours.
+
+    ``history`` records carry ``stage`` and ``loss`` (see :func:`nurbskit.fit.run_stage`);
+    ``alternation`` (mean squared distances of the projection + least-squares rounds)
+    is drawn first when given.
+    """
+    fig = _figure((7, 4))
+    ax = fig.subplots()
+    offset = 0
+    if len(alternation):
+        ax.semilogy(np.arange(len(alternation)), alternation, "k.-", label="alternation (mean sq. distance)")
+        offset = len(alternation)
+    stages: dict[str, list] = {}
+    for k, rec in enumerate(history):
+        stages.setdefault(rec["stage"], []).append((offset + k, rec["loss"]))
+    for name, xy in stages.items():
+        a = np.asarray(xy, dtype=float)
+        pos = a[:, 1] > 0
+        if pos.all():
+            ax.semilogy(a[:, 0], a[:, 1], label=name)
+        else:
+            ax.plot(a[:, 0], a[:, 1], label=name)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("loss (fit units: unit bounding-box diagonal)")
+    ax.set_title(title)
+    if stages or len(alternation):
+        ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    return _save(fig, path)
