@@ -103,7 +103,7 @@ def write_stl(path, vertices, faces, *, binary: bool = True) -> list[str]:
                 cols += [normal[:, c]]
             for k in range(3):
                 cols += [t[:, k, 0], t[:, k, 1], t[:, k, 2]]
-            rows = format_rows(cols, "f" * 12, 9)
+            rows = format_rows(cols, "f" * 12, 17)  # the float32 values, exactly
             out = []
             for line in rows.split(b"\n")[:-1]:
                 v = line.split(b" ")
