@@ -110,6 +110,10 @@ def describe(path: str | Path, **nurbs_options) -> dict:
     finite = np.isfinite(pts).all(axis=1)
     good = pts[finite]
     pcd = payload.info.get("format", "").startswith("pcd")
+    if not pcd:  # NaN marks holes only in PCD; elsewhere it is damage, refused as read_points does
+        from ..io._base import check_finite
+
+        check_finite(path, pts, "vertices" if payload.faces is not None else "points")
     info = {
         "file": str(path), "format": payload.info.get("format", "?"),
         "kind": "mesh" if payload.faces is not None and payload.faces.shape[0] else "points",
@@ -120,7 +124,7 @@ def describe(path: str | Path, **nurbs_options) -> dict:
         "attributes": [n for n in ("normals", "colors", "labels") if getattr(payload, n) is not None],
     }
     if not finite.all():
-        info["dropped_nan_points" if pcd else "nonfinite_points"] = int((~finite).sum())
+        info["dropped_nan_points"] = int((~finite).sum())
     if payload.labels is not None:
         info["num_labels"] = int(np.unique(payload.labels).size)
     for key in ("width", "height"):
@@ -141,8 +145,6 @@ def run_info(args) -> int:
             lines.append(f"  faces       {info['num_faces']:,}")
         if "dropped_nan_points" in info:
             lines.append(f"  NaN holes   {info['dropped_nan_points']:,} (not counted as points; read_points drops them)")
-        if "nonfinite_points" in info:
-            lines.append(f"  non-finite  {info['nonfinite_points']:,} points (read_points refuses them)")
     else:
         lines.append(f"  control pts {info['num_points']:,} ({' x '.join(map(str, info['sizes']))}), "
                      f"degrees {tuple(info['degrees'])}, {'rational' if info['rational'] else 'non-rational'}")
