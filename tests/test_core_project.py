@@ -168,7 +168,8 @@ def test_points_on_the_surface_recover_their_parameters():
     assert distance.max() < 1e-12
     assert torch.allclose(params, uv, rtol=0, atol=1e-9)
     on_edge = (edges == edges.amin(0)) | (edges == edges.amax(0))
-    assert torch.equal(params[:8][on_edge], edges[on_edge])  # held exactly on the edges of the domain
+    # the gradient vanishes on the surface, so an edge parameter may move by rounding only
+    assert torch.allclose(params[:8][on_edge], edges[on_edge], rtol=0, atol=1e-13)
 
 
 def test_never_worse_than_dense_sampling():

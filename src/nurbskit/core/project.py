@@ -37,6 +37,9 @@ from typing import NamedTuple, Sequence
 import torch
 
 from ..errors import NurbskitError
+from . import tensor as _tp
+from .basis import basis_function_derivatives
+from .knots import find_spans
 
 Tensor = torch.Tensor
 
@@ -57,19 +60,43 @@ class Projection(NamedTuple):
 # ----------------------------------------------------------------------------------------
 # the local quadratic model
 # ----------------------------------------------------------------------------------------
-def _local_model(spline, t: Tensor, x: Tensor):
+def _derivatives2(spline, Pw: Tensor, t: Tensor) -> Tensor:
+    """Derivatives up to second order at ``t (M, k)``: ``(M, 3, dim)`` or ``(M, 3, 3, dim)``.
+
+    The same computation as ``spline.derivatives(t, order=2)`` (spans, A2.3 basis
+    derivatives, a gather of the local homogeneous block, the quotient rule), with the
+    homogeneous points ``Pw`` formed once per projection rather than once per iteration,
+    and the block contracted by batched matrix products, which are several times faster
+    on small per-point blocks than a three-operand ``einsum``.
+    """
+    spans, bases = [], []
+    for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
+        s = find_spans(kv, p, n, t[:, a])
+        spans.append(s)
+        bases.append(basis_function_derivatives(kv, p, s, t[:, a], 2))  # (M, 3, p + 1)
+    block = _tp._gather_blocks(Pw, spans, spline.degrees)  # (M, p + 1[, q + 1], D)
+    m, D = t.shape[0], Pw.shape[-1]
+    if spline.para_dim == 1:
+        h = bases[0] @ block  # (M, 3, D)
+    else:
+        (p, q) = spline.degrees
+        h = (bases[0] @ block.reshape(m, p + 1, (q + 1) * D)).reshape(m, 3, q + 1, D)
+        h = bases[1].unsqueeze(1) @ h  # (M, 1, 3, q + 1) @ (M, 3, q + 1, D) -> (M, 3, 3, D)
+    return _tp.rational_derivatives(h, spline.para_dim)
+
+
+def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor):
     """Point, squared distance, gradient and Hessian of ``|C(t) - x|^2 / 2``.
 
     Shapes: ``t (M, k)``, ``x (M, dim)`` -> ``C (M, dim)``, ``f (M,)`` (the squared
     distance), ``g (M, k)``, ``H (M, k, k)``, ``J (M, k, dim)``.
     """
-    if spline.para_dim == 1:
-        D = spline.derivatives(t[:, 0], order=2)  # (M, 3, dim)
+    D = _derivatives2(spline, Pw, t)
+    if spline.para_dim == 1:  # (M, 3, dim)
         C = D[:, 0]
         J = D[:, 1:2]
         second = D[:, 2:3].unsqueeze(1)  # (M, 1, 1, dim)
-    else:
-        D = spline.derivatives(t, order=2)  # (M, 3, 3, dim), [a, b] = d^a/du^a d^b/dv^b
+    else:  # (M, 3, 3, dim), [a, b] = d^a/du^a d^b/dv^b
         C = D[:, 0, 0]
         J = torch.stack([D[:, 1, 0], D[:, 0, 1]], dim=1)
         second = torch.stack(
@@ -77,8 +104,8 @@ def _local_model(spline, t: Tensor, x: Tensor):
         )
     r = C - x
     f = (r * r).sum(-1)
-    g = torch.einsum("mkd,md->mk", J, r)
-    H = J @ J.transpose(1, 2) + torch.einsum("mkld,md->mkl", second, r)
+    g = (J @ r.unsqueeze(-1)).squeeze(-1)
+    H = J @ J.transpose(1, 2) + (second @ r[:, None, :, None]).squeeze(-1)
     return C, f, g, H, J
 
 
@@ -153,7 +180,8 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_sl
     lo = torch.tensor([a for a, _ in spline.domain], dtype=t.dtype, device=t.device)
     hi = torch.tensor([b for _, b in spline.domain], dtype=t.dtype, device=t.device)
     t = torch.maximum(torch.minimum(t, hi), lo).clone()
-    _, f, g, H, J = _local_model(spline, t, x)
+    Pw = _tp.homogeneous(spline.control_points, spline.weights)
+    _, f, g, H, J = _local_model(spline, Pw, t, x)
     scale = torch.ones_like(f)
     active = torch.arange(t.shape[0], device=t.device)
     min_scale = 2.0 ** -16
@@ -163,7 +191,7 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_sl
         ta, Ja = t[active], J[active]
         d = _step(g[active], H[active], Ja, ta, lo, hi) * scale[active, None]
         cand = torch.maximum(torch.minimum(ta + d, hi), lo)
-        _, fc, gc, Hc, Jc = _local_model(spline, cand, x[active])
+        _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x[active])
         fa = f[active]
         accept = fc <= fa + f_slack
         moved = torch.einsum("mk,mkd->md", cand - ta, Ja).norm(dim=-1)
@@ -236,7 +264,8 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> t
         samples, J = D[:, 0, 0], torch.stack([D[:, 1, 0], D[:, 0, 1]], dim=1)
     mesh = torch.meshgrid(*axes, indexing="ij")
     table = torch.stack([m.reshape(-1) for m in mesh], dim=-1)  # (G, k), same order as samples
-    gram = torch.linalg.det(J @ J.transpose(1, 2))
+    JJ = J @ J.transpose(1, 2)
+    gram = JJ[:, 0, 0] if k == 1 else JJ[:, 0, 0] * JJ[:, 1, 1] - JJ[:, 0, 1] * JJ[:, 1, 0]
     regular = gram > 1e-12 * gram.max()
     x = points.detach().to(samples.dtype)
     n = x.shape[0]
