@@ -522,7 +522,6 @@ def test_errors_say_what_was_expected_and_what_arrived():
         insert_knot(s, s.domain[1][1] + 1, axis=1)
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: knots.find_spans clamps u = b to span n - 1, empty when knots[n - 1] == knots[n]")
 def test_core_find_spans_at_a_repeated_unclamped_end():
     """An unclamped knot vector whose domain end b is a double knot: C(b) is the control point P[n - 2]... 
 

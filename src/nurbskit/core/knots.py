@@ -69,12 +69,18 @@ def find_spans(knots: Tensor, degree: int, n_ctrl: int, u: Tensor) -> Tensor:
     """Span index ``k`` with ``knots[k] <= u < knots[k+1]`` for every entry of ``u``.
 
     Shapes: ``knots (n_ctrl + degree + 1,)``, ``u (...)`` -> ``(...)`` int64.
-    Values outside the domain take the first or last span (polynomial extrapolation).
+    Values outside the domain take the first or last non-empty span (polynomial
+    extrapolation); the domain end ``knots[n]`` belongs to the last non-empty span.
     The search runs on detached knots: the span is piecewise constant in the knots.
     """
     k = knots.detach()
     spans = torch.searchsorted(k, u.detach().contiguous(), right=True) - 1
-    return spans.clamp_(degree, n_ctrl - 1)
+    # The first and last non-empty spans of the domain: usually p and n - 1, but an
+    # unclamped vector may repeat its end knots (knots[n - 1] == knots[n]), and then
+    # span n - 1 is empty. Found by search, so no value is read back to the host.
+    first = torch.searchsorted(k, k[degree : degree + 1], right=True) - 1
+    last = torch.searchsorted(k, k[n_ctrl : n_ctrl + 1], right=False) - 1
+    return torch.maximum(torch.minimum(spans, last), first)
 
 
 def multiplicity(knots: Sequence[float] | Tensor, value: float, tol: float = 0.0) -> int:
