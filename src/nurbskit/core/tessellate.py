@@ -1,0 +1,161 @@
+"""Triangle meshes of NURBS surfaces from a uniform parametric grid.
+
+Convention: vertex ``i * S + j`` is the surface at ``(u_i, v_j)`` of the grid
+``surface.grid_axes((R, S))`` (u on the first axis, as everywhere in nurbskit). Each grid
+cell ``(i, j)`` gives two triangles, ``(i, j), (i+1, j), (i+1, j+1)`` and
+``(i, j), (i+1, j+1), (i, j+1)``, in that order, so that a face's normal
+``(b - a) x (c - a)`` points along ``S_u x S_v`` (for the first one it is
+``du dv S_u x S_v`` to first order). Vertex normals are unit ``S_u x S_v``.
+
+Where ``S_u x S_v`` vanishes (a collapsed edge, such as the pole of a sphere built as a
+surface of revolution, where ``S_u = 0`` along the whole edge ``v = v_max``), the normal
+is its limit from inside the domain: with ``S_u(u, v0) = 0``,
+``S_u(u, v) = (v - v0) S_uv + O((v - v0)^2)``, so ``S_u x S_v`` points along
+``sign(v - v0) S_uv x S_v`` (and symmetrically ``sign(u - u0) S_u x S_uv`` when
+``S_v = 0``). Where that limit vanishes as well, the area-weighted mean of the normals of
+the faces around the vertex is used, and where that vanishes too, the mean normal of the
+neighbouring grid vertices. Zero-area triangles at a collapsed edge are kept, so
+the face count is always ``2 (R - 1) (S - 1)``; seams of closed surfaces are not welded.
+
+Everything is built from differentiable tensor operations: vertices and normals carry
+gradients to the surface's control points, weights and knots.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Sequence
+
+import torch
+
+from ..errors import NurbskitError
+
+Tensor = torch.Tensor
+
+__all__ = ["Tessellation", "tessellate", "grid_faces"]
+
+
+class Tessellation(NamedTuple):
+    """Result of :func:`tessellate`; unpacks as ``vertices, faces, normals``."""
+
+    vertices: Tensor
+    """``(R * S, 3)`` surface points, vertex ``i * S + j`` at ``(u_i, v_j)``."""
+    faces: Tensor
+    """``(2 (R - 1) (S - 1), 3)`` int64 vertex indices, counter-clockwise about ``S_u x S_v``."""
+    normals: Tensor
+    """``(R * S, 3)`` unit vertex normals along ``S_u x S_v``."""
+
+
+def grid_faces(rows: int, cols: int, device=None) -> Tensor:
+    """Triangles of a ``rows x cols`` vertex grid (vertex ``i * cols + j``): ``(2 (rows-1) (cols-1), 3)`` int64.
+
+    Example:
+        >>> grid_faces(2, 2).tolist()
+        [[0, 2, 3], [0, 3, 1]]
+    """
+    i = torch.arange(rows - 1, device=device)[:, None]
+    j = torch.arange(cols - 1, device=device)[None, :]
+    a = (i * cols + j).reshape(-1)
+    b, c, d = a + cols, a + cols + 1, a + 1
+    first = torch.stack([a, b, c], dim=-1)
+    second = torch.stack([a, c, d], dim=-1)
+    # interleave so that the two triangles of cell (i, j) are faces 2k and 2k + 1
+    return torch.stack([first, second], dim=1).reshape(-1, 3)
+
+
+def _unit(n: Tensor) -> Tensor:
+    return n / n.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(n.dtype).tiny)
+
+
+def tessellate(surface, resolution: int | Sequence[int] = 32) -> Tessellation:
+    """Vertices, triangles and vertex normals of a surface on a uniform parametric grid.
+
+    Args:
+        surface: a 3-D :class:`NURBSSurface`.
+        resolution: ``R`` or ``(R, S)`` samples per direction, each ``>= 2``, ends included.
+
+    Returns:
+        ``Tessellation(vertices (R*S, 3), faces (2(R-1)(S-1), 3) int64, normals (R*S, 3))``;
+        dtype and device follow the surface (see the module docstring for the
+        conventions).
+
+    Example:
+        >>> import torch
+        >>> from nurbskit import NURBSSurface
+        >>> s = NURBSSurface(torch.rand(4, 4, 3), degrees=(3, 3))
+        >>> vertices, faces, normals = tessellate(s, (8, 6))
+        >>> vertices.shape, faces.shape, normals.shape
+        (torch.Size([48, 3]), torch.Size([70, 3]), torch.Size([48, 3]))
+    """
+    if getattr(surface, "para_dim", None) != 2:
+        raise NurbskitError(f"tessellate takes a NURBSSurface, got {type(surface).__name__}")
+    if surface.dim != 3:
+        raise NurbskitError(f"tessellate needs a surface in 3-D (normals), got control points of dimension {surface.dim}")
+    res = (resolution, resolution) if isinstance(resolution, int) else tuple(resolution)
+    if len(res) != 2 or any(int(r) != r or r < 2 for r in res):
+        raise NurbskitError(f"tessellate: resolution must be an int or (R, S) with each >= 2, got {resolution!r}")
+    R, S = int(res[0]), int(res[1])
+    u, v = surface.grid_axes((R, S))
+    D = surface.evaluate_grid(u, v, order=1)  # (R, S, 2, 2, 3)
+    vertices = D[:, :, 0, 0].reshape(-1, 3)
+    Su, Sv = D[:, :, 1, 0].reshape(-1, 3), D[:, :, 0, 1].reshape(-1, 3)
+    n = torch.linalg.cross(Su, Sv, dim=-1)
+    faces = grid_faces(R, S, device=vertices.device)
+
+    with torch.no_grad():
+        size = n.norm(dim=-1)
+        # sqrt(eps) relative: rows next to a pole still have |n| ~ 1/R of the largest.
+        degenerate = size <= torch.finfo(n.dtype).eps ** 0.5 * size.max()
+    if bool(degenerate.any()):
+        n = _repair_normals(surface, n, Su, Sv, u, v, degenerate, vertices, faces)
+    return Tessellation(vertices, faces, _unit(n))
+
+
+def _repair_normals(surface, n, Su, Sv, u, v, degenerate, vertices, faces) -> Tensor:
+    """Replace degenerate ``S_u x S_v`` by their limit from inside, or by face normals."""
+    R, S = len(u), len(v)
+    idx = torch.nonzero(degenerate).reshape(-1)
+    ui, vj = u[idx // S], v[idx % S]
+    D2 = surface.derivatives(torch.stack([ui, vj], dim=-1), order=2)  # (K, 3, 3, 3)
+    su, sv, suv = D2[:, 1, 0], D2[:, 0, 1], D2[:, 1, 1]
+    (u0, u1), (v0, v1) = surface.domain
+    one = torch.ones_like(ui)
+    sign_v = torch.where(vj >= v1, -one, one)[:, None]  # inside lies below v_max, above elsewhere
+    sign_u = torch.where(ui >= u1, -one, one)[:, None]
+    with torch.no_grad():
+        su_small = su.norm(dim=-1) <= sv.norm(dim=-1)
+    limit = torch.where(
+        su_small[:, None],
+        sign_v * torch.linalg.cross(suv, sv, dim=-1),
+        sign_u * torch.linalg.cross(su, suv, dim=-1),
+    )
+    # Fallback: area-weighted mean of the surrounding face normals ((b - a) x (c - a) has
+    # twice the area as its length, so a plain sum weights by area).
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    fn = torch.linalg.cross(b - a, c - a, dim=-1)
+    around = torch.zeros_like(vertices).index_add(0, faces.reshape(-1), fn.repeat_interleave(3, dim=0))
+    with torch.no_grad():
+        scale = n.norm(dim=-1).max()
+        ok = limit.norm(dim=-1) > torch.finfo(n.dtype).eps ** 0.5 * scale
+    repaired = torch.where(ok[:, None], _unit(limit), _unit(around[idx]))
+    n = n.index_copy(0, idx, repaired * scale)
+    return _fill_from_neighbours(n.reshape(R, S, 3), scale).reshape(-1, 3)
+
+
+def _fill_from_neighbours(n: Tensor, scale: Tensor) -> Tensor:
+    """Give vertices still without a normal the mean of their grid neighbours' normals.
+
+    ``n (R, S, 3)``. Needed where every surrounding face has zero area too (a corner of
+    the grid touches one triangle only, which a collapsed edge may flatten). Repeats
+    until each such vertex has a neighbour with a normal (at most ``R + S`` rounds).
+    """
+    R, S, _ = n.shape
+    for _ in range(R + S):
+        with torch.no_grad():
+            missing = n.norm(dim=-1) <= torch.finfo(n.dtype).eps ** 0.5 * scale
+        if not bool(missing.any()):
+            break
+        unit = torch.where(missing[..., None], torch.zeros_like(n), _unit(n))
+        padded = torch.nn.functional.pad(unit.permute(2, 0, 1), (1, 1, 1, 1)).permute(1, 2, 0)
+        around = sum(padded[1 + di : 1 + di + R, 1 + dj : 1 + dj + S] for di in (-1, 0, 1) for dj in (-1, 0, 1))
+        n = torch.where(missing[..., None], around, n)
+    return n
