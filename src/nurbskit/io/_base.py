@@ -288,11 +288,39 @@ def parse_table(path: Path, block: bytes, rows: int | None, what: str, first_lin
     return table
 
 
+def columns_to_float64(columns) -> np.ndarray:
+    """Stack 1-D columns (any numeric dtype, strided fields of a record array) into a
+    C-contiguous ``(N, k)`` float64 array: one pass per column, no intermediate copies."""
+    columns = list(columns)
+    out = np.empty((len(columns[0]), len(columns)), dtype=np.float64)
+    for i, c in enumerate(columns):
+        out[:, i] = c
+    return out
+
+
+def nonfinite_rows(array: np.ndarray) -> np.ndarray:
+    """Boolean mask of the rows of ``(N, k)`` holding a NaN or infinite value.
+
+    The row sums are a cheap first test (a NaN or infinity anywhere makes the sum
+    non-finite); only when some sum is non-finite, which overflow can also cause,
+    are the values checked one by one.
+    """
+    if array.ndim == 1:
+        return ~np.isfinite(array)
+    total = array[:, 0].copy()
+    for i in range(1, array.shape[1]):
+        total += array[:, i]
+    bad = ~np.isfinite(total)
+    if bad.any():
+        bad = ~np.isfinite(array).all(axis=1)
+    return bad
+
+
 def check_finite(path: Path, array: np.ndarray, what: str) -> None:
     """InputError naming the first row with a NaN or infinite value."""
-    bad = ~np.isfinite(array)
+    bad = nonfinite_rows(array.reshape(array.shape[0], -1))
     if bad.any():
-        row = int(np.flatnonzero(bad.reshape(array.shape[0], -1).any(axis=1))[0])
+        row = int(np.flatnonzero(bad)[0])
         raise InputError(
             f"{path}: {what} contain NaN or infinite values (first at {what.rstrip('s')} {row}: "
             f"{array[row].tolist()})"

@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
-from ._base import InputError, Lines, Payload, check_declared, check_fits, clean_text, parse_table, read_bytes
+from ._base import (
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, columns_to_float64, parse_table, read_bytes,
+)
 from .lzf import LZFError, compress_literal, decompress
 from .text import format_rows
 
@@ -159,10 +161,10 @@ def read_pcd(path: str | os.PathLike) -> Payload:
     for axis in "xyz":
         if axis not in columns:
             raise InputError(f"{path}: PCD FIELDS has no '{axis}'")
-    points = np.stack([np.asarray(columns[a], dtype=np.float64) for a in "xyz"], axis=1)
+    points = columns_to_float64(columns[a] for a in "xyz")
     normals = colors = labels = None
     if all(k in columns for k in ("normal_x", "normal_y", "normal_z")):
-        normals = np.stack([np.asarray(columns[k], dtype=np.float64) for k in ("normal_x", "normal_y", "normal_z")], axis=1)
+        normals = columns_to_float64(columns[k] for k in ("normal_x", "normal_y", "normal_z"))
     for key in ("rgb", "rgba"):
         if key in columns:
             packed = np.ascontiguousarray(columns[key])
@@ -227,7 +229,7 @@ def write_pcd(path, points, normals=None, colors=None, labels=None, *, data: str
     with atomic_open(path, "wb") as handle:
         handle.write(header)
         if data == "binary":
-            handle.write(rec.tobytes())
+            handle.write(memoryview(rec).cast("B"))
         elif data == "binary_compressed":
             soa = b"".join(np.ascontiguousarray(rec[name]).tobytes() for name, _ in fields)
             packed = compress_literal(soa)

@@ -20,7 +20,7 @@ import numpy as np
 from .._fs import atomic_open
 from ._base import (
     InputError, Lines, Payload, check_declared, check_faces, check_fits, clean_text,
-    colors_to_uint8, fan_triangulate, parse_table, read_bytes,
+    colors_to_uint8, columns_to_float64, fan_triangulate, parse_table, read_bytes,
 )
 
 _TYPES = {
@@ -361,11 +361,11 @@ def read_ply(path: str | os.PathLike) -> Payload:
             raise InputError(f"{path}: PLY vertex element has no '{axis}' property")
     count = len(vertex["x"])
     check_fits(path, count * 8 * 10, "the vertices")
-    points = np.stack([np.asarray(vertex[a], dtype=np.float64) for a in "xyz"], axis=1)
+    points = columns_to_float64(vertex[a] for a in "xyz")
     normals = colors = labels = None
     names = _pick(vertex, NORMAL_NAMES)
     if names:
-        normals = np.stack([np.asarray(vertex[n], dtype=np.float64) for n in names[:3]], axis=1)
+        normals = columns_to_float64(vertex[n] for n in names[:3])
     names = _pick(vertex, COLOR_NAMES)
     if names:
         colors = colors_to_uint8(np.stack([np.asarray(vertex[n]) for n in names], axis=1))
@@ -421,7 +421,7 @@ def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, 
     with atomic_open(path, "wb") as handle:
         handle.write(head)
         if binary:
-            handle.write(rec.tobytes())
+            handle.write(memoryview(rec).cast("B"))
             if faces is not None:
                 frec = np.empty(nf, dtype=[("n", "u1"), ("v", "<i4", (3,))])
                 frec["n"] = 3

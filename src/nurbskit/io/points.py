@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
-from ._base import InputError, PointCloud, as_attribute, as_points, check_finite
+from ._base import PointCloud, as_attribute, as_points, check_finite, nonfinite_rows
 from .formats import POINT_WRITE, read_payload
 
 NONFINITE = ("drop", "error", "keep")
@@ -50,7 +50,7 @@ def read_points(path: str | os.PathLike, *, nonfinite: str | None = None, format
     if nonfinite == "error":
         check_finite(path, points, "points")
     elif nonfinite == "drop":
-        keep = np.isfinite(points).all(axis=1)
+        keep = ~nonfinite_rows(points)
         if not keep.all():
             dropped += int((~keep).sum())
             points = points[keep]
