@@ -4,7 +4,8 @@ Question: what do ``insert_knot``, ``refine_knots`` and ``elevate_degree`` of
 ``nurbskit.core.ops`` cost on rational surfaces of 10x10 .. 40x40 control points, against
 geomdl 5.4 doing the same operation in pure Python on the same surface, and how does
 our time split between building the per-direction matrix (NumPy, The NURBS Book
-A5.1 / A5.4 / A5.9 run on the identity) and applying it (torch)?
+A5.1 / A5.4 run on the identity, elevation through the Bezier form) and applying it
+(torch)?
 
 Method (see benchmarks/README_ops.md):
 

@@ -128,7 +128,7 @@ def test_evaluation_commutes_with_affine_maps(cls, ku, kv, seed):
     moved = obj._replace(control_points=obj.control_points @ A.T + shift)
     uv = params(obj, rng)
     expected = evaluate(obj, uv) @ A.T + shift
-    np.testing.assert_allclose(evaluate(moved, uv).numpy(), expected.numpy(), atol=TOL * 10, rtol=0)
+    np.testing.assert_allclose(evaluate(moved, uv).numpy(), expected.numpy(), atol=TOL, rtol=0)
 
 
 @SETTINGS
