@@ -261,19 +261,21 @@ class Lines:
         return self.body[self.start(i): int(self.ends[i])]
 
 
-def parse_table(path: Path, block: bytes, rows: int | None, what: str, first_line: int = 1,
-                delimiter: str | None = None, dtype=np.float64) -> np.ndarray:
-    """Parse a block of numeric text lines into a ``(rows, cols)`` array (numpy's C parser).
+def parse_table(path: Path, block: bytes | Path, rows: int | None, what: str, first_line: int = 1,
+                delimiter: str | None = None, dtype=np.float64, comments: str | None = None) -> np.ndarray:
+    """Parse numeric text lines into a ``(rows, cols)`` array with numpy's C parser.
 
-    Raises an InputError naming the file, the line and the text when a line is not numbers
-    or the rows differ in length.
+    ``block`` is the text, or a Path to hand to the parser directly (no copy in Python).
+    Raises an InputError naming the file, the data line and the text when a line is not
+    numbers or the rows differ in length.
     """
-    if not block.strip():
+    if isinstance(block, bytes) and not block.strip():
         return np.zeros((0, 0), dtype)
+    source = io.BytesIO(block) if isinstance(block, bytes) else block
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            table = np.loadtxt(io.BytesIO(block), dtype=dtype, ndmin=2, comments=None, delimiter=delimiter)
+            table = np.loadtxt(source, dtype=dtype, ndmin=2, comments=comments, delimiter=delimiter)
     except ValueError as exc:
         msg = str(exc)
         # numpy counts rows from 0; comment and blank lines were removed, so say "data line"

@@ -24,7 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
-from ._base import InputError, Lines, Payload, check_declared, clean_text, colors_to_uint8, parse_table, read_bytes
+from ._base import (
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, parse_table, read_bytes,
+)
 
 TEXT_EXTENSIONS = (".xyz", ".txt", ".csv", ".xyzc", ".pts", ".xyzn", ".asc")
 
@@ -57,19 +59,43 @@ def format_rows(columns, kinds, precision: int = 17, delimiter: str = " ") -> by
     return b"".join(chunks)
 
 
-def read_table(path: Path, data: bytes | None = None, *, skip_count_line: bool = False):
-    """The numeric table of a text file: ``(rows, cols)`` float64 (comments, blank lines dropped)."""
-    if data is None:
-        data = read_bytes(path)
-    if b"\x00" in data[:4096]:
+def read_table(path: Path, *, skip_count_line: bool = False):
+    """The numeric table of a text file: ``(rows, cols)`` float64 (``#`` comments, blank lines dropped).
+
+    The file goes straight to numpy's C parser (``np.loadtxt`` on the path); only its head
+    is looked at in Python, for binary junk and the delimiter.
+    """
+    size = path.stat().st_size
+    # the parsed table takes at most ~3x the text (one float64 per number of >= 2 characters)
+    check_fits(path, 3 * size, "the parsed numbers")
+    with open(path, "rb") as handle:
+        head = handle.read(1 << 16)
+    if b"\x00" in head[:4096]:
         raise InputError(f"{path}: expected a text file of numbers, found binary data")
-    body = clean_text(data)
+    if skip_count_line:
+        return _read_table_with_count(path)
+    first = clean_text(head).split(b"\n", 1)[0] if size > len(head) else None
+    if first is None:  # small file: clean it all to find the first data line
+        body = clean_text(head)
+        if not body:
+            raise InputError(f"{path}: the file holds no data lines (only comments or blank lines)")
+        first = body.split(b"\n", 1)[0]
+    delimiter = "," if b"," in first else None
+    table = parse_table(path, path, None, "point lines", delimiter=delimiter, comments="#")
+    if table.size == 0:
+        raise InputError(f"{path}: the file holds no data lines (only comments or blank lines)")
+    return table
+
+
+def _read_table_with_count(path: Path):
+    """PTS: an optional first line with the point count, checked against the lines that follow."""
+    body = clean_text(read_bytes(path))
     if not body:
         raise InputError(f"{path}: the file holds no data lines (only comments or blank lines)")
     lines = Lines(body)
     first = lines.line(0)
     start = 0
-    if skip_count_line and len(first.split()) == 1 and lines.count > 1:
+    if len(first.split()) == 1 and lines.count > 1:
         try:
             declared = int(first)
         except ValueError:
@@ -82,8 +108,7 @@ def read_table(path: Path, data: bytes | None = None, *, skip_count_line: bool =
             )
     delimiter = "," if b"," in lines.line(start) else None
     block = body[lines.start(start):] if start else body
-    table = parse_table(path, block, None, "point lines", first_line=start + 1, delimiter=delimiter)
-    return table
+    return parse_table(path, block, None, "point lines", first_line=start + 1, delimiter=delimiter)
 
 
 def read_text_points(path: str | os.PathLike) -> Payload:
