@@ -121,11 +121,12 @@ def _read_zip(path: Path) -> Payload:
                 with archive.open(member) as src, open(target, "wb") as dst:
                     while chunk := src.read(1 << 20):
                         dst.write(chunk)
-                payload = read_payload(target)
+                try:
+                    payload = read_payload(target)
+                except InputError as exc:  # name the member inside the archive, not the temporary copy
+                    raise InputError(str(exc).replace(str(target), f"{path}[{member.filename}]")) from None
     except zipfile.BadZipFile as exc:
         raise InputError(f"{path}: not a valid zip archive ({exc})") from None
-    except InputError as exc:
-        raise InputError(f"{path}: {str(exc)}") from None
     payload.info["format"] = f"zip ({payload.info.get('format', '?')})"
     return payload
 

@@ -29,6 +29,7 @@ _TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
+_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f", "f8": "d"}
 _FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 
 NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
@@ -147,9 +148,7 @@ def _walk_records(path, data, pos, el: _Element, order: str):
     plan = []
     for prop in el.props:
         if len(prop) == 2:
-            plan.append((prop[0], None, struct.Struct(order + prop[1].replace("i1", "b").replace("u1", "B")
-                                                      .replace("i2", "h").replace("u2", "H").replace("i4", "i")
-                                                      .replace("u4", "I").replace("f4", "f").replace("f8", "d"))))
+            plan.append((prop[0], None, struct.Struct(order + _STRUCT[prop[1]])))
         else:
             plan.append((prop[0], np.dtype(order + prop[2]), np.dtype(order + prop[3])))
     n_data = len(data)
