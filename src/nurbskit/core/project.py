@@ -74,8 +74,15 @@ def _derivatives2(spline, Pw: Tensor, t: Tensor) -> Tensor:
         s = find_spans(kv, p, n, t[:, a])
         spans.append(s)
         bases.append(basis_function_derivatives(kv, p, s, t[:, a], 2))  # (M, 3, p + 1)
-    block = _tp._gather_blocks(Pw, spans, spline.degrees)  # (M, p + 1[, q + 1], D)
+    # the local control block (M, p + 1[, q + 1], D) through one flat index_select
     m, D = t.shape[0], Pw.shape[-1]
+    flat = Pw.reshape(-1, D)
+    rows = [sp.unsqueeze(-1) - p + torch.arange(p + 1, device=sp.device) for sp, p in zip(spans, spline.degrees)]
+    if spline.para_dim == 1:
+        index = rows[0]
+    else:
+        index = rows[0].unsqueeze(-1) * spline.sizes[1] + rows[1].unsqueeze(-2)
+    block = flat.index_select(0, index.reshape(-1)).reshape(index.shape + (D,))
     if spline.para_dim == 1:
         h = bases[0] @ block  # (M, 3, D)
     else:
@@ -176,36 +183,44 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
 
 @torch.no_grad()
 def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_slack: float) -> Tensor:
-    """Refine start parameters ``t (M, k)`` for points ``x (M, dim)`` -> ``(M, k)``."""
+    """Refine start parameters ``t (M, k)`` for points ``x (M, dim)`` -> ``(M, k)``.
+
+    The state of the points still iterating is kept compact (finished points leave it),
+    and updated with ``torch.where``, ``index_select`` and ``index_copy_``: on CPU these
+    are an order of magnitude faster than boolean or advanced indexing.
+    """
     lo = torch.tensor([a for a, _ in spline.domain], dtype=t.dtype, device=t.device)
     hi = torch.tensor([b for _, b in spline.domain], dtype=t.dtype, device=t.device)
-    t = torch.maximum(torch.minimum(t, hi), lo).clone()
-    Pw = _tp.homogeneous(spline.control_points, spline.weights)
+    t = torch.maximum(torch.minimum(t, hi), lo)
+    out = t.clone()
+    Pw = _tp.homogeneous(spline.control_points, spline.weights).contiguous()
     _, f, g, H, J = _local_model(spline, Pw, t, x)
     scale = torch.ones_like(f)
-    active = torch.arange(t.shape[0], device=t.device)
+    index = torch.arange(t.shape[0], device=t.device)
     min_scale = 2.0 ** -16
     for _ in range(iterations):
-        if active.numel() == 0:
+        if index.numel() == 0:
             break
-        ta, Ja = t[active], J[active]
-        d = _step(g[active], H[active], Ja, ta, lo, hi) * scale[active, None]
-        cand = torch.maximum(torch.minimum(ta + d, hi), lo)
-        _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x[active])
-        fa = f[active]
-        accept = fc <= fa + f_slack
-        moved = torch.einsum("mk,mkd->md", cand - ta, Ja).norm(dim=-1)
-        acc = active[accept]
-        t[acc], f[acc], g[acc], H[acc], J[acc] = cand[accept], fc[accept], gc[accept], Hc[accept], Jc[accept]
-        scale[acc] = 1.0
-        rej = active[~accept]
-        scale[rej] = scale[rej] * 0.5
+        d = _step(g, H, J, t, lo, hi) * scale[:, None]
+        cand = torch.maximum(torch.minimum(t + d, hi), lo)
+        _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x)
+        accept = fc <= f + f_slack
+        moved = ((cand - t).unsqueeze(-1) * J).sum(1).norm(dim=-1)
+        a1, a2 = accept[:, None], accept[:, None, None]
+        t, f, g = torch.where(a1, cand, t), torch.where(accept, fc, f), torch.where(a1, gc, g)
+        H, J = torch.where(a2, Hc, H), torch.where(a2, Jc, J)
+        scale = torch.where(accept, torch.ones_like(scale), 0.5 * scale)
         # Converged: the last step moved the foot point by less than tol (Newton is
         # quadratic, so the accepted point is then accurate to about tol^2 / curvature
         # radius); stuck: the step was halved until it no longer matters.
-        done = (moved <= tol_move) | (~accept & (scale[active] < min_scale))
-        active = active[~done]
-    return t
+        done = (moved <= tol_move) | (~accept & (scale < min_scale))
+        if bool(done.any()):
+            fin = torch.nonzero(done).reshape(-1)
+            out.index_copy_(0, index.index_select(0, fin), t.index_select(0, fin))
+            keep = torch.nonzero(~done).reshape(-1)
+            index, t, f, g, H, J, scale, x = (z.index_select(0, keep) for z in (index, t, f, g, H, J, scale, x))
+    out.index_copy_(0, index, t)  # points still moving after the last iteration
+    return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -272,7 +287,7 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> t
     idx = _nearest(samples, x, chunk, starts).to(table.device)  # (N, count)
     own = torch.arange(n, device=table.device)
     rows = [own] + [own] * (idx.shape[1] - 1)
-    t0 = [table[idx[:, 0]]] + [table[idx[:, j]] for j in range(1, idx.shape[1])]
+    t0 = [table.index_select(0, idx[:, j]) for j in range(idx.shape[1])]
     degenerate = torch.nonzero(~regular[idx[:, 0]]).reshape(-1)
     if degenerate.numel() and bool(regular.any()):
         sub = _nearest(samples[regular], x[degenerate], chunk)[:, 0].to(table.device)
@@ -382,7 +397,7 @@ def project_points(
         params = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
         if flat.shape[0]:
             rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
-            targets = xd[rows]
+            targets = xd.index_select(0, rows)
             found = torch.empty_like(starts_t)
             for i in range(0, starts_t.shape[0], chunk):
                 found[i : i + chunk] = _newton(fixed, starts_t[i : i + chunk], targets[i : i + chunk], iterations, tol_move, f_slack)
@@ -396,7 +411,7 @@ def project_points(
                 # ties: the earliest start wins, deterministically on every device
                 choice = torch.full((flat.shape[0],), rows.numel(), dtype=torch.int64, device=rows.device)
                 choice = choice.scatter_reduce(0, rows[winner], winner, reduce="amin")
-                params = found[choice]
+                params = found.index_select(0, choice)
     params = _as_eval(params, k)
     closest = spline.evaluate(params)
     distance = (flat - closest).norm(dim=-1)
