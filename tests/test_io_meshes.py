@@ -218,3 +218,22 @@ def test_write_mesh_validates(tmp_path):
         write_mesh(tmp_path / "a.ply", SQUARE, [[0.0, 1.0, 2.0]])
     with pytest.raises(OptionError, match="cannot write a mesh as '.pcd'"):
         write_mesh(tmp_path / "a.pcd", SQUARE, [[0, 1, 2]])
+
+
+def test_zip_archives(tmp_path):
+    import zipfile
+
+    write_mesh(tmp_path / "m.off", SQUARE, [[0, 1, 2]])
+    with zipfile.ZipFile(tmp_path / "one.zip", "w") as z:
+        z.write(tmp_path / "m.off", "inner/m.off")
+    assert read_mesh(tmp_path / "one.zip").faces.tolist() == [[0, 1, 2]]
+    with zipfile.ZipFile(tmp_path / "two.zip", "w") as z:
+        z.write(tmp_path / "m.off", "a.off")
+        z.write(tmp_path / "m.off", "b.off")
+    with pytest.raises(InputError, match=r"expected one point or mesh file in the zip archive, found \['a.off', 'b.off'\]"):
+        read_mesh(tmp_path / "two.zip")
+    (tmp_path / "bad.off").write_text("OFF\n3 1 0\n0 0 0\n")
+    with zipfile.ZipFile(tmp_path / "bad.zip", "w") as z:
+        z.write(tmp_path / "bad.off", "bad.off")
+    with pytest.raises(InputError, match=r"bad\.zip\[bad\.off\]: header declares 3 vertices"):
+        read_mesh(tmp_path / "bad.zip")
