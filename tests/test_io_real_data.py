@@ -237,3 +237,28 @@ def test_real_mesh_round_trip_every_mesh_format(shared_data, tmp_path, ext):
     np.testing.assert_allclose(back.vertices[back.faces], mesh.vertices[mesh.faces], **tol)
     if ext != ".stl":
         np.testing.assert_array_equal(back.normals, mesh.normals)
+
+
+@pytest.mark.parametrize("ext", [".json", "geomdl", ".ctrlpts", ".cptw", ".smesh", ".3dm"])
+def test_real_nurbs_round_trip_every_nurbs_format(shared_data, tmp_path, ext):
+    from nurbskit.io import write_nurbs
+
+    if ext == ".3dm":
+        pytest.importorskip("rhino3dm")
+    folder = shared_data / "thesis_nurbsdiff"
+    knots = json.loads((folder / "ducky/duck_knots.json").read_text())["duck1_body"]
+    objects = [
+        read_nurbs(folder / "ducky/duck1.ctrlpts", sizes=(14, 13), degrees=(3, 3),
+                   knot_vectors=[knots["knotvector_u_raw"], knots["knotvector_v_raw"]]),
+        read_nurbs(folder / "nurbs_surfaces/roof_smesh.1.dat"),
+        read_nurbs(folder / "nurbs_surfaces/AMSurface.json"),
+    ]
+    for i, obj in enumerate(objects):
+        path = tmp_path / (f"o{i}.json" if ext == "geomdl" else f"o{i}{ext}")
+        write_nurbs(path, obj, format="geomdl" if ext == "geomdl" else None)
+        back = read_nurbs(path)
+        assert back.sizes == obj.sizes and back.degrees == obj.degrees
+        np.testing.assert_allclose(back.control_points.numpy(), obj.control_points.numpy(), rtol=1e-15, atol=1e-13)
+        np.testing.assert_allclose(back.weights.numpy(), obj.weights.numpy(), rtol=1e-15)
+        for a, b in zip(back.knot_vectors, obj.knot_vectors):
+            np.testing.assert_array_equal(a.numpy(), b.numpy())
