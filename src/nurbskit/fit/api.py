@@ -21,7 +21,7 @@ from ..errors import InputError, OptionError
 from .config import FitConfig
 from .init import initial_surface
 from .lstsq import alternate
-from .loop import Progress, Target, run_stage
+from .loop import Progress, Target, eliminated_control_points, run_stage
 from .params import SurfaceParameters, Topology, new_surface
 from .pipelines import get_pipeline, supervised_default
 
@@ -175,7 +175,8 @@ def fit_surface(
     gen = torch.Generator().manual_seed(int(cfg.seed))
 
     # Initial surface.
-    if cfg.init.kind == "target":
+    if cfg.supervised and cfg.init.kind in ("target", "lstsq"):
+        # The target's knots and weights when its net matches the requested one.
         if target_surface is not None and tuple(target_surface.sizes) == tuple(ctrl) and tuple(target_surface.degrees) == tuple(degree):
             ts = target_surface.to(dtype=dtype, device=device)
             kvs = [_normalised_knots(k, p, n) for k, p, n in zip(ts.knot_vectors, ts.degrees, ts.sizes)]
@@ -185,6 +186,9 @@ def fit_surface(
         lo_n, hi_n = xn.min(0).values, xn.max(0).values
         r = torch.rand(ctrl[0], ctrl[1], 3, generator=gen, dtype=dtype).to(device)
         surface = new_surface(lo_n + (hi_n - lo_n) * r, degree, False, kvs, weights)
+        if cfg.init.kind == "lstsq":
+            # The exact minimiser of the supervised L2 loss at these knots and weights.
+            surface = surface._replace(control_points=eliminated_control_points(surface, target, Topology()))
         topology = Topology()
     else:
         surface, topology = initial_surface(

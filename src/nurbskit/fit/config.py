@@ -111,8 +111,9 @@ class InitConfig:
         "auto",
         "initial surface: random control points; plane (a sheet on the best-fitting plane); "
         "cylinder (a cage around the principal axis, closed in v); cage (cylinder when the input "
-        "looks closed, else plane); lstsq (least squares from a plane or cylinder parametrisation); "
-        "target (supervised: the target's knots and weights, random control points); auto (lstsq)",
+        "looks closed, else plane); lstsq (least squares from a plane or cylinder parametrisation; "
+        "supervised: from the grid, at the target's knots and weights); target (supervised: the "
+        "target's knots and weights, random control points); auto (lstsq)",
     )
     closed: Literal["auto", "open", "v"] = _f(
         "auto", "surface topology: 'open' sheet, closed in 'v' (periodic seam), or 'auto' detection"

@@ -227,8 +227,9 @@ def make_optimizer(stage: StageConfig, tensors: list[Tensor]) -> torch.optim.Opt
     if stage.optimizer == "sgd":
         return torch.optim.SGD(tensors, lr=stage.lr, momentum=0.9)
     if stage.optimizer == "lbfgs":
+        # max_eval bounds the line search too (torch derives it from max_iter=1 as 1: no search at all).
         return torch.optim.LBFGS(
-            tensors, lr=stage.lr, max_iter=1, history_size=20, line_search_fn="strong_wolfe",
+            tensors, lr=stage.lr, max_iter=1, max_eval=25, history_size=20, line_search_fn="strong_wolfe",
             tolerance_grad=1e-14, tolerance_change=1e-16,
         )
     raise OptionError(f"optimizer must be adam, sgd or lbfgs, got {stage.optimizer!r}")
