@@ -31,6 +31,7 @@ _LAZY = {
     "elevate_degree": "nurbskit.core.ops",
     "split": "nurbskit.core.ops",
     "reverse": "nurbskit.core.ops",
+    "decompose_bezier": "nurbskit.core.ops",
     "sample_mesh": "nurbskit.geometry.sampling",
     "fit_surface": "nurbskit.fit",
     "fit_silhouettes": "nurbskit.volume",
