@@ -7,8 +7,10 @@ from a good start point), vectorised over all points and made robust for a box d
    chunked ``torch.cdist`` elsewhere).
 2. **Newton** on ``f(t) = |C(t) - x|^2 / 2``: gradient ``g = J r``, Hessian
    ``H = J J^T + sum_d r_d * d^2 C_d`` with ``r = C(t) - x`` and ``J`` the first
-   derivatives (rows ``C_u``, ``C_v``), all from ``derivatives(order=2)``.
-3. **Bounds** (projected Newton with an active set, Bertsekas 1982): a parameter that sits on
+   derivatives (rows ``C_u``, ``C_v``): the spline's derivatives up to order 2 (A2.3
+   basis derivatives and the rational quotient rule, as ``derivatives(order=2)``).
+3. **Bounds** (projected Newton with an active set; D. P. Bertsekas, "Projected Newton
+   methods for optimization problems with simple constraints", 1982): a parameter that sits on
    the edge of the domain while the gradient or the Newton step points outward is held
    there, and Newton continues on the remaining parameter alone, i.e. on the boundary
    curve. A step that would leave the domain is clamped.
@@ -182,8 +184,12 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
 
 
 @torch.no_grad()
-def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_slack: float) -> Tensor:
+def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, noise: float) -> Tensor:
     """Refine start parameters ``t (M, k)`` for points ``x (M, dim)`` -> ``(M, k)``.
+
+    ``noise`` is the rounding error of a computed point (``eps`` times the size of the
+    control net): a step is accepted unless it raises ``f = |r|^2`` by more than the
+    rounding of ``f``, about ``4 noise (|r| + noise)``.
 
     The state of the points still iterating is kept compact (finished points leave it),
     and updated with ``torch.where``, ``index_select`` and ``index_copy_``: on CPU these
@@ -204,7 +210,7 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, f_sl
         d = _step(g, H, J, t, lo, hi) * scale[:, None]
         cand = torch.maximum(torch.minimum(t + d, hi), lo)
         _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x)
-        accept = fc <= f + f_slack
+        accept = fc <= f + 4 * noise * (f.sqrt() + noise)
         moved = ((cand - t).unsqueeze(-1) * J).sum(1).norm(dim=-1)
         a1, a2 = accept[:, None], accept[:, None, None]
         t, f, g = torch.where(a1, cand, t), torch.where(accept, fc, f), torch.where(a1, gc, g)
@@ -392,15 +398,13 @@ def project_points(
         cp = fixed.control_points.reshape(-1, spline.dim)
         size = float((cp.amax(0) - cp.amin(0)).norm()) or 1.0
         tol_move = (eps ** 0.75 if tol is None else float(tol)) * size
-        # Acceptance slack for f = |r|^2: rounding of f near a minimum is ~eps * size^2.
-        f_slack = 16 * eps * size * size
         params = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
         if flat.shape[0]:
             rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
             targets = xd.index_select(0, rows)
             found = torch.empty_like(starts_t)
             for i in range(0, starts_t.shape[0], chunk):
-                found[i : i + chunk] = _newton(fixed, starts_t[i : i + chunk], targets[i : i + chunk], iterations, tol_move, f_slack)
+                found[i : i + chunk] = _newton(fixed, starts_t[i : i + chunk], targets[i : i + chunk], iterations, tol_move, eps * size)
             params = found[: flat.shape[0]].clone()
             if rows.numel() > flat.shape[0]:
                 # several starts for some points: keep the closest result
