@@ -122,12 +122,15 @@ def _poisson(v, f, area, n: int, rng, oversample: int):
     # on the bunny, fandisk and the thesis meshes): a first guess, then a search on r with
     # the candidate pairs computed once.
     r0 = np.sqrt(0.5 * total / n)
-    tree = cKDTree(cand)
+    # an unbalanced tree without node compaction builds about twice as fast and queries as fast
+    tree = cKDTree(cand, balanced_tree=False, compact_nodes=False)
     r_max = 1.2 * r0
     pairs = tree.query_pairs(r_max, output_type="ndarray")
-    diff = cand[pairs[:, 0]] - cand[pairs[:, 1]]
-    dist2 = np.einsum("ij,ij->i", diff, diff)
-    del diff
+    a, b = pairs[:, 0], pairs[:, 1]
+    dist2 = np.zeros(len(pairs))
+    for axis in range(3):  # gathers from contiguous 1-D columns are faster than row gathers
+        column = np.ascontiguousarray(cand[:, axis])
+        dist2 += (column[a] - column[b]) ** 2
     rank = rng.permutation(m)
 
     def run(r):
