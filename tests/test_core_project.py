@@ -322,3 +322,16 @@ def test_errors_name_the_problem():
         project_points(NURBSVolume(torch.rand(2, 2, 2, 3, dtype=F64), degrees=(1, 1, 1)), torch.zeros(1, 3, dtype=F64))
     with pytest.raises(NurbskitError, match="NURBSCurve"):
         project_points_curve(s, torch.zeros(1, 3, dtype=F64))
+
+
+def test_nearest_sample_kdtree_and_cdist_agree():
+    # the KD-tree serves CPU tensors, chunked cdist the accelerators: same answers
+    from nurbskit.core.project import _nearest
+
+    g = torch.Generator().manual_seed(14)
+    samples = torch.rand(500, 3, dtype=F64, generator=g)
+    points = torch.rand(300, 3, dtype=F64, generator=g)
+    by_tree = _nearest(samples, points, chunk=64, count=3, tree=True)
+    by_cdist = _nearest(samples, points, chunk=64, count=3, tree=False)
+    assert torch.equal(by_tree, by_cdist)
+    assert torch.equal(by_tree[:, 0], torch.cdist(points, samples).argmin(dim=1))

@@ -232,14 +232,19 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, nois
 # ----------------------------------------------------------------------------------------
 # start points
 # ----------------------------------------------------------------------------------------
-def _nearest(samples: Tensor, points: Tensor, chunk: int, count: int = 1) -> Tensor:
-    """Indices ``(N, count)`` of the ``count`` nearest rows of ``samples (G, dim)`` to ``points (N, dim)``."""
+def _nearest(samples: Tensor, points: Tensor, chunk: int, count: int = 1, tree: bool | None = None) -> Tensor:
+    """Indices ``(N, count)`` of the ``count`` nearest rows of ``samples (G, dim)`` to ``points (N, dim)``.
+
+    ``tree`` (default: on CPU) uses scipy's KD-tree, otherwise a chunked ``torch.cdist``.
+    """
     count = min(count, samples.shape[0])
-    if samples.device.type == "cpu":
+    if tree is None:
+        tree = samples.device.type == "cpu"
+    if tree:
         from scipy.spatial import cKDTree
 
-        tree = cKDTree(samples.double().numpy())
-        _, idx = tree.query(points.double().numpy(), k=count, workers=max(1, torch.get_num_threads()))
+        kd = cKDTree(samples.double().numpy())
+        _, idx = kd.query(points.double().numpy(), k=count, workers=max(1, torch.get_num_threads()))
         return torch.as_tensor(idx, dtype=torch.int64).reshape(points.shape[0], count)
     # On accelerators a chunked brute force is one GEMM per chunk; the chunk keeps the
     # (rows, G) distance block near 2^24 entries.
