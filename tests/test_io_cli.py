@@ -195,3 +195,15 @@ def test_no_traceback_through_a_real_process(tmp_path):
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [
         f"nurbskit info: error: {tmp_path / 'bad.ply'}: header declares 2 records but the body has only 1 lines"]
+
+
+def test_info_on_bare_ctrlpts_then_with_sizes(tmp_path, capsys):
+    np.savetxt(tmp_path / "c.ctrlpts", np.arange(36.0).reshape(12, 3))
+    info = json.loads(run(capsys, "info", tmp_path / "c.ctrlpts", "--json")[1])
+    assert info["kind"] == "control points" and info["num_points"] == 12 and "--sizes" in info["note"]
+    rc, out, _ = run(capsys, "info", tmp_path / "c.ctrlpts", "--json", "--sizes", 4, 3, "--degrees", 3, 2)
+    info = json.loads(out)
+    assert rc == 0 and info["kind"] == "surface" and info["sizes"] == [4, 3] and info["degrees"] == [3, 2]
+    rc, _, err = run(capsys, "info", tmp_path / "c.ctrlpts", "--sizes", 5, 3, "--degrees", 3, 2)
+    assert rc == 2
+    one_line_error(err, "c.ctrlpts", "holds 12 control points but sizes [5, 3] need 15")

@@ -95,7 +95,20 @@ def describe(path: str | Path, **nurbs_options) -> dict:
     formats.check_readable(path)
     if is_nurbs_file(path):
         fmt = nurbs_format(path)
-        obj = read_nurbs(path, **nurbs_options)
+        try:
+            obj = read_nurbs(path, **nurbs_options)
+        except OptionError:
+            if nurbs_options or fmt != "ctrlpts":
+                raise
+            # a bare .ctrlpts file: describe the points; the grid needs --sizes/--degrees
+            from ..io.text import read_table
+
+            table = read_table(path)
+            return {
+                "file": str(path), "format": fmt, "kind": "control points", "num_points": int(table.shape[0]),
+                "bbox": [table.min(axis=0).tolist(), table.max(axis=0).tolist()], "attributes": [],
+                "note": "sizes and degrees unknown: pass --sizes and --degrees, or a side JSON, to read it as NURBS",
+            }
         cp = obj.control_points.detach().cpu().double().numpy().reshape(-1, obj.dim)
         return {
             "file": str(path), "format": fmt if fmt != "json" else "json", "kind": obj.kind,
@@ -145,6 +158,9 @@ def run_info(args) -> int:
             lines.append(f"  faces       {info['num_faces']:,}")
         if "dropped_nan_points" in info:
             lines.append(f"  NaN holes   {info['dropped_nan_points']:,} (not counted as points; read_points drops them)")
+    elif info["kind"] == "control points":
+        lines.append(f"  points      {info['num_points']:,}")
+        lines.append(f"  note        {info['note']}")
     else:
         lines.append(f"  control pts {info['num_points']:,} ({' x '.join(map(str, info['sizes']))}), "
                      f"degrees {tuple(info['degrees'])}, {'rational' if info['rational'] else 'non-rational'}")

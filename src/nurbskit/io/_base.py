@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError, OptionError
 
 
-@dataclass
+@dataclass(eq=False)  # arrays have no single truth value: compare fields yourself
 class PointCloud:
     """Points read from a file.
 
@@ -58,7 +58,7 @@ class PointCloud:
         return [n for n in ("normals", "colors", "labels") if getattr(self, n) is not None]
 
 
-@dataclass
+@dataclass(eq=False)
 class Mesh:
     """A triangle mesh read from a file.
 
@@ -90,7 +90,7 @@ class Mesh:
         return int(self.faces.shape[0])
 
 
-@dataclass
+@dataclass(eq=False)
 class Payload:
     """What a format reader hands to the dispatchers (internal)."""
 
