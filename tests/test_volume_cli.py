@@ -1,0 +1,123 @@
+"""`nurbskit volume` end to end: outputs, report, and one-line errors."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from PIL import Image
+
+from nurbskit import load
+from nurbskit.cli import main
+from nurbskit.volume.shapes import solid_drawings, sphere_and_box
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture
+def drawings(tmp_path):
+    paths = {}
+    for view, mask in solid_drawings(sphere_and_box, 64).items():
+        path = tmp_path / f"{view}.png"
+        Image.fromarray(((1 - mask.numpy()) * 255).astype(np.uint8)).save(path)  # ink on paper
+        paths[view] = str(path)
+    return paths
+
+
+def args(drawings, out, *extra):
+    return ["volume", "--front", drawings["front"], "--left", drawings["left"], "--top", drawings["top"],
+            "--out", str(out), *extra]
+
+
+def test_volume_command_writes_everything(tmp_path, drawings, capsys):
+    out = tmp_path / "fit"
+    rc = main(args(drawings, out, "--control-size", "10", "--grid", "24", "--iters", "30",
+                   "--mesh-resolution", "40", "--loss", "silhouette"))
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["mesh.obj", "mesh.ply", "report.json", "views.png", "volume.json"]
+    report = json.loads((out / "report.json").read_text())
+    assert report["config"]["control_size"] == [10, 10, 10] and report["config"]["loss"] == "silhouette"
+    assert set(report["iou"]) == {"front", "left", "top"} and min(report["iou"].values()) > 0.8
+    assert report["seconds"]["total"] > 0 and report["empty"] is False
+    volume = load(out / "volume.json")
+    assert volume.kind == "volume" and volume.control_points.shape == (10, 10, 10, 1)
+    mesh = trimesh.load(out / "mesh.obj", process=False, force="mesh")
+    assert mesh.vertices.min() >= 0 and mesh.vertices.max() <= 1 and len(mesh.faces) == report["mesh"]["faces"]
+    assert len(trimesh.load(out / "mesh.ply", process=False, force="mesh").faces) == len(mesh.faces)
+    with Image.open(out / "views.png") as png:
+        assert png.size[0] > png.size[1] > 100
+    assert "IoU front" in err
+
+
+def test_existing_output_needs_overwrite(tmp_path, drawings, capsys):
+    out = tmp_path / "fit"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    rc = main(args(drawings, out, "--iters", "1", "--quiet"))
+    assert rc == 2 and "--overwrite" in capsys.readouterr().err
+    assert (out / "keep.txt").exists()
+    rc = main(args(drawings, out, "--control-size", "5", "--grid", "10", "--iters", "3", "--overwrite", "--quiet"))
+    assert rc in (0, 1)
+    assert not (out / "keep.txt").exists() and (out / "report.json").exists()
+
+
+def test_empty_result_is_reported_not_hidden(tmp_path, drawings, capsys):
+    out = tmp_path / "fit"
+    rc = main(args(drawings, out, "--control-size", "5", "--grid", "10", "--iters", "0", "--quiet"))
+    assert rc == 1
+    assert "no surface at isovalue 0.5" in capsys.readouterr().err
+    assert json.loads((out / "report.json").read_text())["empty"] is True
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--iters", "-3"], "expected an integer >= 0"),
+        (["--isovalue", "nan"], "expected a finite number"),
+        (["--loss", "chamfer"], "invalid choice"),
+    ],
+)
+def test_malformed_options_are_usage_errors(tmp_path, drawings, capsys, extra, message):
+    with pytest.raises(SystemExit) as info:
+        main(args(drawings, tmp_path / "o", "--quiet", *extra))
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--grid", "1"], "--grid must be at least 2"),
+        (["--control-size", "2"], "--control-size 2 is too small for --degree 2"),
+        (["--shape-weight", "0"], "shape_weight must be > 0"),
+        (["--device", "tpu9"], "--device"),
+    ],
+)
+def test_nonsense_options_give_one_line(tmp_path, drawings, capsys, extra, message):
+    rc = main(args(drawings, tmp_path / "o", "--quiet", *extra))
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("content, message", [("text", "cannot be read as an image"), ("blank", "drawing is empty")])
+def test_bad_drawings_give_one_line(tmp_path, drawings, capsys, content, message):
+    bad = tmp_path / "bad.png"
+    if content == "text":
+        bad.write_text("hello")
+    else:
+        Image.fromarray(np.full((30, 30), 250, np.uint8)).save(bad)
+    drawings = dict(drawings, left=str(bad))
+    rc = main(args(drawings, tmp_path / "o", "--quiet"))
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and "left drawing" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,120 @@
+"""fit_silhouettes end to end on drawings made by code (small sizes; ~seconds each)."""
+
+import pytest
+import torch
+
+import nurbskit
+from nurbskit.errors import OptionError
+from nurbskit.volume import fit_silhouettes, visual_hull_iou
+from nurbskit.volume.shapes import paper_drawings, solid_drawings, sphere_and_box
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    # Other jobs share the 2 cores; OpenMP barriers under contention cost more than the
+    # second thread gains on these small problems. Results do not depend on it.
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def sphere_box():
+    return solid_drawings(sphere_and_box, 96)
+
+
+@pytest.fixture(scope="module")
+def paper_set():
+    return paper_drawings(96)
+
+
+SMALL = dict(control_size=16, grid=48, mesh_resolution=96, iou_resolution=128)
+
+
+def test_consistent_silhouettes_are_reproduced(sphere_box):
+    d = sphere_box
+    result = fit_silhouettes(d["front"], d["left"], d["top"], loss="silhouette", **SMALL)
+    assert result.hull_iou == {"front": 1.0, "left": 1.0, "top": 1.0}  # consistent by construction
+    for view, score in result.iou.items():
+        assert score >= 0.95, (view, result.iou)
+
+
+def test_paper_loss_on_consistent_silhouettes(sphere_box):
+    d = sphere_box
+    result = fit_silhouettes(d["front"], d["left"], d["top"], loss="paper", **SMALL)
+    assert min(result.iou.values()) >= 0.93, result.iou
+    assert result.costs["total"] < 0.1 * result.costs["initial_total"]
+    assert result.history[0] == result.costs["initial_total"]
+
+
+def test_inconsistent_set_gets_close_to_the_visual_hull(paper_set):
+    d = paper_set
+    hull = visual_hull_iou(d, 128)
+    assert hull["top"] < 0.99  # no solid matches all three: the hull misses part of the heart
+    result = fit_silhouettes(d["front"], d["left"], d["top"], loss="silhouette", **SMALL)
+    assert result.hull_iou == hull
+    for view in hull:
+        assert result.iou[view] >= 0.9 * hull[view], (view, result.iou, hull)
+    assert not result.mesh.is_empty
+
+
+def test_result_volume_is_a_scalar_field_with_positive_weights(paper_set):
+    d = paper_set
+    seen = []
+    result = fit_silhouettes(
+        d["front"], d["left"], d["top"], control_size=(6, 7, 5), grid=12, iterations=5,
+        callback=lambda stage, done, total, cost: seen.append((stage, done, total)),
+    )
+    volume, mesh = result  # unpacks as (volume, mesh)
+    assert volume.control_points.shape == (6, 7, 5, 1) and volume.degrees == (2, 2, 2)
+    assert (volume.weights > 0).all()
+    assert volume.dtype == torch.float32
+    assert mesh is result.mesh
+    assert seen[-1] == ("mesh", 1, 1) and ("fit", 5, 5) in seen
+    # the volume evaluates, through the core, to the field the mesh was cut from
+    grid = volume.sample(12)[..., 0]
+    from nurbskit.volume.mesh import isosurface
+
+    again = isosurface(grid, 0.5)
+    assert again.vertices.shape == mesh.vertices.shape
+    report = result.report()
+    assert set(report["iou"]) == {"front", "left", "top"} and report["config"]["grid"] == [12, 12, 12]
+
+
+def test_zero_iterations_keeps_the_initial_field(paper_set):
+    d = paper_set
+    result = fit_silhouettes(d["front"], d["left"], d["top"], control_size=5, grid=8, iterations=0)
+    assert torch.equal(result.volume.control_points, torch.zeros(5, 5, 5, 1))
+    assert result.mesh.is_empty and "no surface at isovalue 0.5" in result.message
+    assert result.iterations == 0
+
+
+def test_float64_inputs_give_a_float64_volume(paper_set):
+    d = {k: v.double() for k, v in paper_set.items()}
+    result = fit_silhouettes(d["front"], d["left"], d["top"], control_size=5, grid=8, iterations=2)
+    assert result.volume.dtype == torch.float64
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(control_size=2), "control_size must be one or three integers >= 3"),
+        (dict(grid=(10, 10)), "grid must be one or three integers"),
+        (dict(degree=0), "degree must be an integer >= 1"),
+        (dict(iterations=-1), "iterations must be an integer >= 0"),
+        (dict(loss="chamfer"), "loss must be one of"),
+        (dict(init="random"), "init must be one of"),
+        (dict(shape_weight=0.0), "shape_weight must be > 0"),
+        (dict(smooth_weight=-1.0), "smooth_weight must be >= 0"),
+        (dict(isovalue=float("nan")), "isovalue must be a finite number"),
+    ],
+)
+def test_nonsense_options_are_rejected(paper_set, kwargs, message):
+    d = paper_set
+    with pytest.raises(OptionError, match=message):
+        fit_silhouettes(d["front"], d["left"], d["top"], **kwargs)
+
+
+def test_lazy_top_level_name():
+    assert nurbskit.fit_silhouettes is fit_silhouettes
