@@ -161,7 +161,7 @@ def test_text_clouds(shared_data):
 
 
 def test_duck_ctrlpts_with_weights_and_knots(shared_data):
-    geomdl = pytest.importorskip("geomdl")
+    pytest.importorskip("geomdl")
     from geomdl import NURBS, compatibility, exchange
 
     folder = shared_data / "thesis_nurbsdiff/ducky"

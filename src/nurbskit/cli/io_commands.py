@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, NurbskitError, OptionError
+from ..errors import InputError, OptionError
 
 
 def register(subparsers) -> None:
