@@ -154,13 +154,13 @@ def fit_surface(
 
     # Normalise: centre of the bounding box to the origin, diagonal to 1.
     lo, hi = pts.min(0).values, pts.max(0).values
+    if not float((hi - lo).norm()) > 0:
+        raise InputError(f"all {pts.shape[0]} input points coincide; there is no surface to fit")
     if cfg.normalize:
         center = (lo + hi) / 2
-        scale = float((hi - lo).norm()) or 1.0
+        scale = float((hi - lo).norm())
     else:
         center, scale = torch.zeros(3, dtype=dtype, device=device), 1.0
-    if scale == 0.0:
-        raise InputError("all input points coincide; there is no surface to fit")
     xn = (pts - center) / scale
     target = Target(
         points=xn,
