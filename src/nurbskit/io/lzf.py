@@ -42,7 +42,7 @@ def decompress(data: bytes | bytearray | memoryview, expected_size: int, *, use_
     src = bytes(data)
     n = len(src)
     out = bytearray()
-    i = 0
+    i = pos = 0  # input offset, output length (kept as ints: cheaper than len() per token)
     while i < n:
         c = src[i]
         i += 1
@@ -51,6 +51,7 @@ def decompress(data: bytes | bytearray | memoryview, expected_size: int, *, use_
             if end > n:
                 raise LZFError(f"literal run of {c + 1} bytes at input offset {i - 1} passes the end of the data")
             out += src[i:end]
+            pos += c + 1
             i = end
         else:
             length = c >> 5
@@ -64,19 +65,18 @@ def decompress(data: bytes | bytearray | memoryview, expected_size: int, *, use_
             offset = ((c & 31) << 8) + src[i] + 1
             i += 1
             length += 2
-            start = len(out) - offset
+            start = pos - offset
             if start < 0:
-                raise LZFError(f"back reference {offset} bytes back, but only {len(out)} bytes were produced")
+                raise LZFError(f"back reference {offset} bytes back, but only {pos} bytes were produced")
             if offset >= length:
                 out += out[start: start + length]
             else:  # overlapping copy repeats the last `offset` bytes
-                pattern = bytes(out[start:])
-                reps = -(-length // offset)
-                out += (pattern * reps)[:length]
-        if len(out) > expected_size:
-            raise LZFError(f"stream decodes to more than the {expected_size} bytes announced")
-    if len(out) != expected_size:
-        raise LZFError(f"stream decodes to {len(out)} bytes, {expected_size} were announced")
+                out += (bytes(out[start:]) * (-(-length // offset)))[:length]
+            pos += length
+            if pos > expected_size:  # also bounds what a corrupt stream can make us allocate
+                raise LZFError(f"stream decodes to more than the {expected_size} bytes announced")
+    if pos != expected_size:
+        raise LZFError(f"stream decodes to {pos} bytes, {expected_size} were announced")
     return bytes(out)
 
 
