@@ -108,6 +108,10 @@ def test_float64_inputs_give_a_float64_volume(paper_set):
         (dict(shape_weight=0.0), "shape_weight must be > 0"),
         (dict(smooth_weight=-1.0), "smooth_weight must be >= 0"),
         (dict(isovalue=float("nan")), "isovalue must be a finite number"),
+        (dict(tolerance=-1.0), "tolerance must be >= 0"),
+        (dict(laplacian_unit=0.0), "laplacian_unit must be > 0"),
+        (dict(smooth_samples="all"), "smooth_samples must be one of"),
+        (dict(sharpness=-2.0), "sharpness must be > 0"),
     ],
 )
 def test_nonsense_options_are_rejected(paper_set, kwargs, message):
@@ -118,3 +122,34 @@ def test_nonsense_options_are_rejected(paper_set, kwargs, message):
 
 def test_lazy_top_level_name():
     assert nurbskit.fit_silhouettes is fit_silhouettes
+
+
+def test_smoothness_samples_are_the_grid_or_the_span_midpoints():
+    from nurbskit.core.knots import clamped_uniform
+    from nurbskit.volume.fit import _smoothness_axis
+
+    kv = clamped_uniform(7, 2, dtype=torch.float64)  # 5 knot spans of width 0.2
+    coarse = torch.linspace(0, 1, 5, dtype=torch.float64)
+    assert _smoothness_axis(kv, 2, 7, coarse) is coarse
+    fine = torch.linspace(0, 1, 40, dtype=torch.float64)
+    assert torch.allclose(_smoothness_axis(kv, 2, 7, fine), torch.tensor([0.1, 0.3, 0.5, 0.7, 0.9], dtype=torch.float64))
+
+
+def test_auto_smoothness_samples_equal_grid_samples_when_the_grid_is_coarse(paper_set):
+    d = paper_set
+    kw = dict(control_size=12, grid=8, iterations=3)  # 8 grid points < 10 knot spans
+    a = fit_silhouettes(d["front"], d["left"], d["top"], smooth_samples="auto", **kw)
+    b = fit_silhouettes(d["front"], d["left"], d["top"], smooth_samples="grid", **kw)
+    assert a.history == b.history
+    # on a fine grid they differ, and both still fit
+    kw = dict(control_size=8, grid=24, iterations=10)
+    c = fit_silhouettes(d["front"], d["left"], d["top"], smooth_samples="auto", **kw)
+    e = fit_silhouettes(d["front"], d["left"], d["top"], smooth_samples="grid", **kw)
+    assert c.costs["smooth"] != e.costs["smooth"]
+    assert c.costs["total"] < c.costs["initial_total"] and e.costs["total"] < e.costs["initial_total"]
+
+
+def test_zero_tolerance_runs_every_iteration(sphere_box):
+    d = sphere_box
+    result = fit_silhouettes(d["front"], d["left"], d["top"], control_size=12, grid=8, iterations=15, tolerance=0.0)
+    assert result.iterations == 15

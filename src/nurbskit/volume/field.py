@@ -100,7 +100,8 @@ class GridField:
         X = self._homogeneous(values, weights)
         for axis in range(3):
             X = _product(X, self.matrices[axis][0], axis)
-        return X[0] / X[1]
+        A, W = X.unbind(0)  # unbind, not indexing: its backward is one stack, not two zero-filled copies
+        return A / W
 
     def evaluate_with_laplacian(
         self, values: Tensor, weights: Tensor, scale: Sequence[float] = (1.0, 1.0, 1.0)
@@ -112,30 +113,33 @@ class GridField:
         if not self.second_derivatives:
             raise OptionError("this GridField was built without second derivatives")
         Bu, Bv, Bw = self.matrices
-        R, S, T = self.shape
         X = self._homogeneous(values, weights)
-        # u: orders 0, 1, 2 stacked as rows -> (2, 3R, n_v, n_w)
-        U = _product(X, Bu.reshape(3 * R, -1), 0)
-        U0 = U[:, :R]
-        U12 = U[:, R:].reshape(2, 2, R, *U.shape[2:]).reshape(4, R, *U.shape[2:])
-        # v: orders 0, 1, 2 after u-order 0; order 0 after u-orders 1, 2
-        V0 = _product(U0, Bv.reshape(3 * S, -1), 1)  # (2, R, 3S, n_w)
-        V12 = _product(U12, Bv[0], 1)  # (4, R, S, n_w): A_u, A_uu, W_u, W_uu
-        # w: orders 0, 1, 2 after (0, 0); order 0 after the rest
-        W00 = _product(V0[:, :, :S], Bw.reshape(3 * T, -1), 2)  # (2, R, S, 3T)
-        W0v = _product(V0[:, :, S:], Bw[0], 2)  # (2, R, 2S, T)
-        Wu0 = _product(V12, Bw[0], 2)  # (4, R, S, T)
-
-        A, Wt = W00[0, ..., :T], W00[1, ..., :T]
+        # One product per derivative order (no slicing of stacked results: the backward
+        # of a slice fills a zero tensor the size of the whole stack).
+        U = [_product(X, Bu[o], 0) for o in range(3)]  # (2, R, n_v, n_w) each
+        V00 = _product(U[0], Bv[0], 1)
+        V = {  # (u-order, v-order) -> (2, R, S, n_w)
+            (0, 0): V00,
+            (0, 1): _product(U[0], Bv[1], 1),
+            (0, 2): _product(U[0], Bv[2], 1),
+            (1, 0): _product(U[1], Bv[0], 1),
+            (2, 0): _product(U[2], Bv[0], 1),
+        }
+        H = {(a, b, 0): _product(x, Bw[0], 2) for (a, b), x in V.items()}
+        H[(0, 0, 1)] = _product(V00, Bw[1], 2)
+        H[(0, 0, 2)] = _product(V00, Bw[2], 2)
+        A, Wt = H[(0, 0, 0)].unbind(0)
         f = A / Wt
         inv = 1.0 / Wt
 
-        def second(a1, w1, a2, w2):
+        def second(first_order, second_order):
+            a1, w1 = H[first_order].unbind(0)
+            a2, w2 = H[second_order].unbind(0)
             fa = (a1 - w1 * f) * inv
             return (a2 - 2 * w1 * fa - w2 * f) * inv
 
-        f_uu = second(Wu0[0], Wu0[2], Wu0[1], Wu0[3])
-        f_vv = second(W0v[0, :, :S], W0v[1, :, :S], W0v[0, :, S:], W0v[1, :, S:])
-        f_ww = second(W00[0, ..., T : 2 * T], W00[1, ..., T : 2 * T], W00[0, ..., 2 * T :], W00[1, ..., 2 * T :])
+        f_uu = second((1, 0, 0), (2, 0, 0))
+        f_vv = second((0, 1, 0), (0, 2, 0))
+        f_ww = second((0, 0, 1), (0, 0, 2))
         su, sv, sw = (float(s) ** 2 for s in scale)
         return f, su * f_uu + sv * f_vv + sw * f_ww

@@ -32,6 +32,7 @@ from .views import VIEW_NAMES, VIEWS, project_grid
 Tensor = torch.Tensor
 LOSSES = ("paper", "silhouette")
 INITS = ("zeros", "hull")
+SMOOTH_SAMPLES = ("auto", "grid")
 #: ``callback(stage, done, total, cost)``: stage 'fit' once per L-BFGS iteration (cost is
 #: the total cost), then 'mesh' once (cost None).
 ProgressCallback = Callable[[str, int, int, "float | None"], None]
@@ -58,7 +59,15 @@ class VolumeFitConfig:
     init: str = "zeros"
     """'zeros' (the paper: values 0, weights 1) or 'hull' (values from the visual hull)."""
     sharpness: float = 20.0
-    """Silhouette loss: slope of the soft occupancy ``sigmoid(sharpness (f - isovalue))``."""
+    """Silhouette loss: slope of the soft projection ``sigmoid(sharpness (max f - isovalue))``."""
+    laplacian_unit: float = 0.01
+    """Length unit of the smoothness cost's Laplacian (``unit^2 lap f``), as a fraction of the cube."""
+    smooth_samples: str = "auto"
+    """Where the smoothness cost is sampled: 'grid' (the fitting grid, as the paper) or 'auto'
+    (the fitting grid, or the knot-span midpoints along an axis where the grid has more
+    points than the control net has knot spans)."""
+    tolerance: float = 1e-9
+    """L-BFGS stops when the cost changes less than this between iterations (0: never)."""
     mesh_resolution: tuple[int, int, int] = (20, 20, 20)
     """Grid for marching cubes (defaults to ``grid``)."""
     iou_resolution: int = 256
@@ -84,7 +93,7 @@ class VolumeFitConfig:
         self.mesh_resolution = triple("mesh_resolution", self.mesh_resolution, 2)
         if not isinstance(self.iterations, (int, np.integer)) or isinstance(self.iterations, bool) or self.iterations < 0:
             raise OptionError(f"iterations must be an integer >= 0, got {self.iterations!r}")
-        for name in ("isovalue", "shape_weight", "smooth_weight", "sharpness"):
+        for name in ("isovalue", "shape_weight", "smooth_weight", "sharpness", "laplacian_unit", "tolerance"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
                 raise OptionError(f"{name} must be a finite number, got {value!r}")
@@ -94,6 +103,12 @@ class VolumeFitConfig:
             raise OptionError(f"smooth_weight must be >= 0, got {self.smooth_weight}")
         if self.sharpness <= 0:
             raise OptionError(f"sharpness must be > 0, got {self.sharpness}")
+        if self.tolerance < 0:
+            raise OptionError(f"tolerance must be >= 0, got {self.tolerance}")
+        if self.laplacian_unit <= 0:
+            raise OptionError(f"laplacian_unit must be > 0, got {self.laplacian_unit}")
+        if self.smooth_samples not in SMOOTH_SAMPLES:
+            raise OptionError(f"smooth_samples must be one of {list(SMOOTH_SAMPLES)}, got {self.smooth_samples!r}")
         if self.loss not in LOSSES:
             raise OptionError(f"loss must be one of {list(LOSSES)}, got {self.loss!r}")
         if self.init not in INITS:
@@ -163,6 +178,19 @@ def _pick_device_dtype(inputs, device, dtype):
     return torch.device(device), dtype
 
 
+def _smoothness_axis(knots: Tensor, degree: int, n_ctrl: int, grid_axis: Tensor) -> Tensor:
+    """Smoothness samples along one axis: the grid, or the knot-span midpoints when finer.
+
+    One sample per knot span already reaches every control value (each basis function
+    covers ``degree + 1`` spans); more samples cost time and add no regularisation.
+    Returns ``grid_axis`` itself when it is kept.
+    """
+    inner = torch.unique_consecutive(knots[degree : n_ctrl + 1])
+    if len(grid_axis) <= len(inner) - 1:
+        return grid_axis
+    return (inner[1:] + inner[:-1]) / 2
+
+
 def projection_iou(mesh: Mesh, drawings: dict, resolution: int) -> tuple[dict, dict]:
     """IoU per view of the mesh's projection against each drawing on a ``resolution^2`` raster.
 
@@ -209,6 +237,8 @@ def fit_silhouettes(
     init: str | None = None,
     sharpness: float = 20.0,
     laplacian_unit: float = 0.01,
+    smooth_samples: str = "auto",
+    tolerance: float = 1e-9,
     mesh_resolution: int | Sequence[int] | None = None,
     iou_resolution: int = 256,
     device: torch.device | str | None = None,
@@ -228,7 +258,10 @@ def fit_silhouettes(
         isovalue, shape_weight, smooth_weight: the paper's ``C``, ``w_shape``, ``w_smooth``.
         loss: 'paper' or 'silhouette' (see :mod:`nurbskit.volume.losses`).
         init: 'zeros' or 'hull'; default 'zeros' for the paper loss, 'hull' for silhouette.
-        sharpness: slope of the silhouette loss's soft occupancy.
+        sharpness: slope of the silhouette loss's soft projection.
+        laplacian_unit: length unit of the smoothness Laplacian (fraction of the cube).
+        smooth_samples: 'auto' or 'grid' (see :class:`VolumeFitConfig`).
+        tolerance: L-BFGS stops when the cost changes less than this (0: run all iterations).
         mesh_resolution: marching-cubes grid (default: ``grid``).
         iou_resolution: raster side for the reported IoU.
         device, dtype: default the device and dtype of tensor inputs, else CPU float32.
@@ -257,6 +290,9 @@ def fit_silhouettes(
         loss=loss,
         init=init if init is not None else ("hull" if loss == "silhouette" else "zeros"),
         sharpness=sharpness,
+        laplacian_unit=laplacian_unit,
+        smooth_samples=smooth_samples,
+        tolerance=tolerance,
         mesh_resolution=grid if mesh_resolution is None else mesh_resolution,
         iou_resolution=iou_resolution,
     ).validate()
@@ -270,8 +306,14 @@ def fit_silhouettes(
     planes = {v.name: mask_on_plane(masks[v.name].to(device, dtype), v, cfg.grid) for v in VIEWS}
     hull = visual_hull(planes)
     use_smooth = cfg.smooth_weight > 0
-    field_grid = GridField(knots, degrees, sizes, axes, second_derivatives=use_smooth)
-    scale = (laplacian_unit,) * 3
+    smooth_axes = [
+        _smoothness_axis(kv, cfg.degree, n, ax) if cfg.smooth_samples == "auto" else ax
+        for kv, n, ax in zip(knots, sizes, axes)
+    ]
+    shared = all(s is a for s, a in zip(smooth_axes, axes))
+    field_grid = GridField(knots, degrees, sizes, axes, second_derivatives=use_smooth and shared)
+    smooth_grid = GridField(knots, degrees, sizes, smooth_axes) if use_smooth and not shared else None
+    scale = (cfg.laplacian_unit,) * 3
 
     if cfg.init == "hull":
         init_planes = {v.name: mask_on_plane(masks[v.name].to(device, dtype), v, sizes) for v in VIEWS}
@@ -283,9 +325,12 @@ def fit_silhouettes(
 
     def costs() -> tuple[Tensor, Tensor, Tensor, Tensor]:
         weights = torch.exp(log_weights)
-        if use_smooth:
+        if use_smooth and smooth_grid is None:
             f, lap = field_grid.evaluate_with_laplacian(values, weights, scale)
             smooth = smoothness_cost(lap)
+        elif use_smooth:
+            f = field_grid.evaluate(values, weights)
+            smooth = smoothness_cost(smooth_grid.evaluate_with_laplacian(values, weights, scale)[1])
         else:
             f = field_grid.evaluate(values, weights)
             smooth = f.new_zeros(())
@@ -305,6 +350,8 @@ def fit_silhouettes(
             max_iter=cfg.iterations,
             max_eval=3 * cfg.iterations,
             history_size=10,
+            tolerance_change=cfg.tolerance,
+            tolerance_grad=1e-7 if cfg.tolerance > 0 else 0.0,
             line_search_fn="strong_wolfe",
         )
         state = optimizer.state[values]
