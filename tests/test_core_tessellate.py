@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from nurbskit import NURBSCurve, NURBSSurface, NurbskitError
-from nurbskit.core.tessellate import grid_faces, tessellate
+from nurbskit.core.tessellate import grid_faces, tessellate, tessellate_adaptive
 
 from test_core_project import F64, RADIUS, cylinder_quarter, smooth_height_field, sphere_octant
 
@@ -118,6 +118,41 @@ def test_gradients_reach_control_points():
     cp = s1.control_points.clone().requires_grad_(True)
     tessellate(NURBSSurface(cp, (2, 2), None, s1.weights), 5).normals.sum().backward()
     assert torch.isfinite(cp.grad).all()
+
+
+def _edge_midpoints(vertices, faces):
+    edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return vertices[edges].mean(dim=1)
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-4])
+def test_adaptive_chords_within_tolerance_on_the_sphere(tolerance):
+    s = sphere_octant()
+    vertices, faces, normals = tessellate_adaptive(s, tolerance)
+    assert torch.allclose(vertices.norm(dim=-1), torch.ones(len(vertices), dtype=F64), atol=1e-14)
+    assert torch.allclose(normals, vertices, atol=1e-12)
+    # every triangle edge's midpoint lies inside the unit sphere within the tolerance
+    gap = 1 - _edge_midpoints(vertices, faces).norm(dim=-1)
+    assert gap.min() > -1e-14 and gap.max() <= tolerance
+    # and the refinement is not wasteful: some edge needs most of the tolerance
+    assert gap.max() > tolerance / 8
+
+
+def test_adaptive_keeps_straight_directions_coarse():
+    s = cylinder_quarter()  # straight in v
+    coarse = tessellate_adaptive(s, 1e-2)
+    fine = tessellate_adaptive(s, 1e-4)
+    assert len(coarse.vertices) % 2 == 0 and len(fine.vertices) % 2 == 0
+    rows_coarse, rows_fine = len(coarse.vertices) // 2, len(fine.vertices) // 2
+    assert rows_fine > 2 * rows_coarse  # sag ~ h^2: 100x less needs ~10x more rows
+    for mesh, tol in ((coarse, 1e-2), (fine, 1e-4)):
+        assert len(mesh.faces) == 2 * (len(mesh.vertices) // 2 - 1)  # S = 2: one strip
+        xy = _edge_midpoints(mesh.vertices, mesh.faces)[:, :2]
+        assert (RADIUS - xy.norm(dim=-1)).max() <= tol
+    fn = _face_normals(fine.vertices, fine.faces)
+    assert ((fn * fine.normals[fine.faces].mean(1)).sum(-1) > 0).all()
+    with pytest.raises(NurbskitError, match="tolerance"):
+        tessellate_adaptive(s, 0.0)
 
 
 def test_dtype_device_and_errors():

@@ -31,7 +31,7 @@ from ..errors import NurbskitError
 
 Tensor = torch.Tensor
 
-__all__ = ["Tessellation", "tessellate", "grid_faces"]
+__all__ = ["Tessellation", "tessellate", "tessellate_adaptive", "grid_faces"]
 
 
 class Tessellation(NamedTuple):
@@ -86,15 +86,24 @@ def tessellate(surface, resolution: int | Sequence[int] = 32) -> Tessellation:
         >>> vertices.shape, faces.shape, normals.shape
         (torch.Size([48, 3]), torch.Size([70, 3]), torch.Size([48, 3]))
     """
-    if getattr(surface, "para_dim", None) != 2:
-        raise NurbskitError(f"tessellate takes a NURBSSurface, got {type(surface).__name__}")
-    if surface.dim != 3:
-        raise NurbskitError(f"tessellate needs a surface in 3-D (normals), got control points of dimension {surface.dim}")
+    _check_surface(surface, "tessellate")
     res = (resolution, resolution) if isinstance(resolution, int) else tuple(resolution)
     if len(res) != 2 or any(int(r) != r or r < 2 for r in res):
         raise NurbskitError(f"tessellate: resolution must be an int or (R, S) with each >= 2, got {resolution!r}")
-    R, S = int(res[0]), int(res[1])
-    u, v = surface.grid_axes((R, S))
+    u, v = surface.grid_axes((int(res[0]), int(res[1])))
+    return _tessellate_axes(surface, u, v)
+
+
+def _check_surface(surface, name: str) -> None:
+    if getattr(surface, "para_dim", None) != 2:
+        raise NurbskitError(f"{name} takes a NURBSSurface, got {type(surface).__name__}")
+    if surface.dim != 3:
+        raise NurbskitError(f"{name} needs a surface in 3-D (normals), got control points of dimension {surface.dim}")
+
+
+def _tessellate_axes(surface, u: Tensor, v: Tensor) -> Tessellation:
+    """:func:`tessellate` on the tensor grid of increasing parameter arrays ``u (R,)``, ``v (S,)``."""
+    R, S = len(u), len(v)
     D = surface.evaluate_grid(u, v, order=1)  # (R, S, 2, 2, 3)
     vertices = D[:, :, 0, 0].reshape(-1, 3)
     Su, Sv = D[:, :, 1, 0].reshape(-1, 3), D[:, :, 0, 1].reshape(-1, 3)
@@ -159,3 +168,65 @@ def _fill_from_neighbours(n: Tensor, scale: Tensor) -> Tensor:
         around = sum(padded[1 + di : 1 + di + R, 1 + dj : 1 + dj + S] for di in (-1, 0, 1) for dj in (-1, 0, 1))
         n = torch.where(missing[..., None], around, n)
     return n
+
+
+def _breaks(knots: Tensor, degree: int, n_ctrl: int) -> Tensor:
+    """Distinct knots inside the domain (span boundaries), ends included: ``(B,)``."""
+    return torch.unique_consecutive(knots.detach()[degree : n_ctrl + 1])
+
+
+def tessellate_adaptive(surface, tolerance: float, *, max_resolution: int = 1025) -> Tessellation:
+    """A tessellation on a non-uniform tensor grid, refined until the chords are within ``tolerance``.
+
+    Starts from the span boundaries (distinct knots) in each direction and bisects a
+    parameter interval while some triangle edge over it deviates from the surface by
+    more than ``tolerance``, measured at the edge's parameter midpoint:
+    ``|S(midpoint) - (S(a) + S(b)) / 2|`` for the edges along u, along v and the cell
+    diagonals. That bounds the distance from each edge midpoint to the surface; flat
+    directions (a ruled or extruded surface) stay at their span boundaries. Refinement
+    stops at ``max_resolution`` samples per direction even if the tolerance is not met.
+
+    Shapes and conventions as :func:`tessellate`, with ``R, S`` chosen by the refinement.
+
+    Example:
+        >>> import torch
+        >>> from nurbskit import NURBSSurface
+        >>> cp = torch.zeros(3, 2, 3)
+        >>> cp[:, :, 0] = torch.tensor([0., 0.5, 1.])[:, None]
+        >>> cp[:, :, 1] = torch.tensor([0., 1.])
+        >>> cp[1, :, 2] = 0.5  # a parabolic cylinder: curved in u, straight in v
+        >>> mesh = tessellate_adaptive(NURBSSurface(cp, degrees=(2, 1)), 1e-3)
+        >>> mesh.vertices.shape  # 17 x 2: sag h^2 / 4 <= 1e-3 needs h = 1/16 in u
+        torch.Size([34, 3])
+    """
+    _check_surface(surface, "tessellate_adaptive")
+    if not tolerance > 0:
+        raise NurbskitError(f"tessellate_adaptive: tolerance must be > 0, got {tolerance!r}")
+    if max_resolution < 2:
+        raise NurbskitError(f"tessellate_adaptive: max_resolution must be >= 2, got {max_resolution}")
+    fixed = surface.detach()
+    axes = [_breaks(kv, p, n) for kv, p, n in zip(fixed.knot_vectors, fixed.degrees, fixed.sizes)]
+    with torch.no_grad():
+        while True:
+            u, v = axes
+            mu, mv = (u[1:] + u[:-1]) / 2, (v[1:] + v[:-1]) / 2
+            P = fixed.evaluate_grid(u, v)  # (R, S, 3)
+            along_u = (fixed.evaluate_grid(mu, v) - (P[1:] + P[:-1]) / 2).norm(dim=-1)  # (R-1, S)
+            along_v = (fixed.evaluate_grid(u, mv) - (P[:, 1:] + P[:, :-1]) / 2).norm(dim=-1)  # (R, S-1)
+            diagonal = (fixed.evaluate_grid(mu, mv) - (P[1:, 1:] + P[:-1, :-1]) / 2).norm(dim=-1)  # (R-1, S-1)
+            split_u = along_u.amax(dim=1) > tolerance
+            split_v = along_v.amax(dim=0) > tolerance
+            # A diagonal's deviation mixes both directions' sag and the twist; splitting
+            # the directions already split usually cures it, so only cells where neither
+            # is split get both.
+            twisted = (diagonal > tolerance) & ~split_u[:, None] & ~split_v[None, :]
+            split_u = split_u | twisted.any(dim=1)
+            split_v = split_v | twisted.any(dim=0)
+            grown = False
+            for a, (split, mid) in enumerate(((split_u, mu), (split_v, mv))):
+                if bool(split.any()) and len(axes[a]) + int(split.sum()) <= max_resolution:
+                    axes[a] = torch.sort(torch.cat([axes[a], mid[split]])).values
+                    grown = True
+            if not grown:
+                break
+    return _tessellate_axes(surface, axes[0], axes[1])
