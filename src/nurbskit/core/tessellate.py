@@ -1,7 +1,11 @@
-"""Triangle meshes of NURBS surfaces from a uniform parametric grid.
+"""Triangle meshes of NURBS surfaces from a parametric tensor grid.
 
-Convention: vertex ``i * S + j`` is the surface at ``(u_i, v_j)`` of the grid
-``surface.grid_axes((R, S))`` (u on the first axis, as everywhere in nurbskit). Each grid
+:func:`tessellate` samples a uniform grid; :func:`tessellate_adaptive` a non-uniform one
+refined until the chords are within a tolerance. Both share one layout.
+
+Convention: vertex ``i * S + j`` is the surface at ``(u_i, v_j)`` of the grid (for
+:func:`tessellate`, ``surface.grid_axes((R, S))``; u on the first axis, as everywhere in
+nurbskit). Each grid
 cell ``(i, j)`` gives two triangles, ``(i, j), (i+1, j), (i+1, j+1)`` and
 ``(i, j), (i+1, j+1), (i, j+1)``, in that order, so that a face's normal
 ``(b - a) x (c - a)`` points along ``S_u x S_v`` (for the first one it is
