@@ -94,6 +94,10 @@ def _derivatives2(spline, Pw: Tensor, t: Tensor) -> Tensor:
     return _tp.rational_derivatives(h, spline.para_dim)
 
 
+_J_ROWS = torch.tensor([3, 1])
+_H_ROWS = torch.tensor([6, 4, 4, 2])
+
+
 def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor):
     """Point, squared distance, gradient and Hessian of ``|C(t) - x|^2 / 2``.
 
@@ -105,12 +109,12 @@ def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor):
         C = D[:, 0]
         J = D[:, 1:2]
         second = D[:, 2:3].unsqueeze(1)  # (M, 1, 1, dim)
-    else:  # (M, 3, 3, dim), [a, b] = d^a/du^a d^b/dv^b
-        C = D[:, 0, 0]
-        J = torch.stack([D[:, 1, 0], D[:, 0, 1]], dim=1)
-        second = torch.stack(
-            [torch.stack([D[:, 2, 0], D[:, 1, 1]], dim=1), torch.stack([D[:, 1, 1], D[:, 0, 2]], dim=1)], dim=1
-        )
+    else:  # (M, 3, 3, dim), [a, b] = d^a/du^a d^b/dv^b, flattened as 3 a + b
+        m, dim = D.shape[0], D.shape[-1]
+        flat = D.reshape(m, 9, dim)
+        C = flat[:, 0]
+        J = flat.index_select(1, _J_ROWS.to(t.device))  # S_u, S_v
+        second = flat.index_select(1, _H_ROWS.to(t.device)).reshape(m, 2, 2, dim)  # S_uu, S_uv; S_uv, S_vv
     r = C - x
     f = (r * r).sum(-1)
     g = (J @ r.unsqueeze(-1)).squeeze(-1)
