@@ -335,3 +335,16 @@ def test_nearest_sample_kdtree_and_cdist_agree():
     by_cdist = _nearest(samples, points, chunk=64, count=3, tree=False)
     assert torch.equal(by_tree, by_cdist)
     assert torch.equal(by_tree[:, 0], torch.cdist(points, samples).argmin(dim=1))
+
+
+def test_zero_distance_has_finite_gradients():
+    # points exactly on the surface: |x - S| is not differentiable at 0; the gradient
+    # must still be finite (torch's norm takes the zero subgradient there)
+    s0 = cylinder_quarter()
+    cp = s0.control_points.clone().requires_grad_(True)
+    s = NURBSSurface(cp, s0.degrees, s0.knot_vectors, s0.weights)
+    p = s0.evaluate(torch.tensor([[0.0, 1.0], [1.5, 4.0]], dtype=F64)).requires_grad_(True)
+    distance = project_points(s, p).distance
+    assert distance.max() < 1e-14
+    distance.sum().backward()
+    assert torch.isfinite(cp.grad).all() and torch.isfinite(p.grad).all()
