@@ -207,3 +207,22 @@ def test_info_on_bare_ctrlpts_then_with_sizes(tmp_path, capsys):
     rc, _, err = run(capsys, "info", tmp_path / "c.ctrlpts", "--sizes", 5, 3, "--degrees", 3, 2)
     assert rc == 2
     one_line_error(err, "c.ctrlpts", "holds 12 control points but sizes [5, 3] need 15")
+
+
+def test_two_gigabyte_file_that_does_not_fit(tmp_path, capsys, monkeypatch):
+    """A consistent 2 GB binary PLY (sparse on disk) on a machine reporting 1 GB free:
+    refused from its size before a byte of the body is read."""
+    n = 2 * 1024**3 // 12
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\n"
+            "property float y\nproperty float z\nend_header\n").encode()
+    path = tmp_path / "two_gb.ply"
+    with open(path, "wb") as handle:
+        handle.write(head)
+        handle.truncate(len(head) + 12 * n)  # sparse: no disk space used
+    import nurbskit.io._base as base
+
+    monkeypatch.setattr(base, "available_memory", lambda: 1024**3)
+    rc, _, err = run(capsys, "convert", path, tmp_path / "out.xyz")
+    assert rc == 2
+    one_line_error(err, "two_gb.ply", "needs about 2.0 GB of memory but only 1.0 GB is available")
+    assert not (tmp_path / "out.xyz").exists()

@@ -30,7 +30,7 @@ def read_off(path: str | os.PathLike) -> Payload:
     """Vertices (with normals or colours when the keyword says so) and triangles of an OFF file.
 
     Example:
-        >>> mesh = read_off("cat.off")  # doctest: +SKIP  (NOFF, 366 vertices, 698 faces)
+        >>> mesh = read_off("cat.off")  # NOFF: 366 vertices, 698 faces  # doctest: +SKIP
     """
     path = Path(path)
     data = read_bytes(path)

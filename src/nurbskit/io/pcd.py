@@ -99,7 +99,7 @@ def read_pcd(path: str | os.PathLike) -> Payload:
     """Points (NaN holes included, in grid order), normals, colours and labels of a PCD file.
 
     Example:
-        >>> payload = read_pcd("test0.pcd")  # doctest: +SKIP  (640 x 480 organised, binary_compressed)
+        >>> payload = read_pcd("test0.pcd")  # 640 x 480, organised, binary_compressed  # doctest: +SKIP
         >>> payload.points.shape  # doctest: +SKIP
         (307200, 3)
     """
