@@ -222,10 +222,10 @@ def run_convert(args) -> int:
         else:
             if out_ext == ".stl":
                 raise InputError(f"{src}: has no faces; STL holds triangles only")
-            from ..io.points import read_points
+            from ..io.points import cloud_from_payload
 
-            # read_points applies the NaN policy (PCD holes dropped, other NaN refused)
-            cloud = read_points(src)
+            # the NaN policy of read_points: PCD holes dropped, other NaN refused
+            cloud = cloud_from_payload(src, payload)
             options = {}
             if out_ext == ".ply":
                 options["binary"] = not args.ascii

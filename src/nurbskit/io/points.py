@@ -42,7 +42,11 @@ def read_points(path: str | os.PathLike, *, nonfinite: str | None = None, format
     if nonfinite is not None and nonfinite not in NONFINITE:
         raise OptionError(f"nonfinite must be one of {NONFINITE}, got {nonfinite!r}")
     path = Path(path)
-    payload = read_payload(path, format)
+    return cloud_from_payload(path, read_payload(path, format), nonfinite)
+
+
+def cloud_from_payload(path: Path, payload, nonfinite: str | None = None) -> PointCloud:
+    """The PointCloud of a reader's payload, with the NaN policy of :func:`read_points` applied."""
     if nonfinite is None:
         nonfinite = "drop" if payload.info.get("format", "").startswith("pcd") else "error"
     points, normals, colors, labels = payload.points, payload.normals, payload.colors, payload.labels
