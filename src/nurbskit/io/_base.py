@@ -310,8 +310,9 @@ def nonfinite_rows(array: np.ndarray) -> np.ndarray:
     if array.ndim == 1:
         return ~np.isfinite(array)
     total = array[:, 0].copy()
-    for i in range(1, array.shape[1]):
-        total += array[:, i]
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is caught by the exact check below
+        for i in range(1, array.shape[1]):
+            total += array[:, i]
     bad = ~np.isfinite(total)
     if bad.any():
         bad = ~np.isfinite(array).all(axis=1)
