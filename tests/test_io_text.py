@@ -172,3 +172,11 @@ def test_torch_tensors_accepted(tmp_path):
     pts = torch.rand(5, 3, dtype=torch.float32)
     write_points(tmp_path / "t.ply", pts)
     np.testing.assert_array_equal(read_points(tmp_path / "t.ply").points, pts.double().numpy())
+
+
+def test_huge_but_finite_coordinates_are_not_mistaken_for_infinity(tmp_path):
+    pts = np.array([[1e308, 1e308, 1e308], [-1e308, 5.0, -1e308]])
+    write_points(tmp_path / "big.xyz", pts)
+    np.testing.assert_array_equal(read_points(tmp_path / "big.xyz").points, pts)
+    write_points(tmp_path / "big.ply", pts)
+    np.testing.assert_array_equal(read_points(tmp_path / "big.ply").points, pts)

@@ -83,8 +83,8 @@ def read_off(path: str | os.PathLike) -> Payload:
         k = table.shape[1] - col - (2 if st else 0)
         if k not in (3, 4):
             raise InputError(f"{path}: COFF vertex lines need 3 or 4 colour values after the coordinates")
-        c = table[:, col: col + k]
-        colors = colors_to_uint8(c if np.any(c > 1) else c)
+        # Geomview allows integers 0..255 or floats 0..1; colors_to_uint8 tells them apart by range
+        colors = colors_to_uint8(table[:, col: col + k])
     faces = _read_faces(path, lines, row + nv, nf)
     extra = lines.count - row - nv - nf
     if extra > 0:
