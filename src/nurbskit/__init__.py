@@ -23,28 +23,30 @@ from .core import (  # noqa: E402
 from .errors import InputError, NurbskitError, OptionError  # noqa: E402
 
 # Heavier parts load on first use, so `import nurbskit` stays light.
+# name -> (module, attribute); attribute None means the module itself.
 _LAZY = {
-    "project_points": "nurbskit.core.project",
-    "tessellate": "nurbskit.core.tessellate",
-    "insert_knot": "nurbskit.core.ops",
-    "refine_knots": "nurbskit.core.ops",
-    "elevate_degree": "nurbskit.core.ops",
-    "split": "nurbskit.core.ops",
-    "reverse": "nurbskit.core.ops",
-    "decompose_bezier": "nurbskit.core.ops",
-    "sample_mesh": "nurbskit.geometry.sampling",
-    "fit_surface": "nurbskit.fit",
-    "fit_silhouettes": "nurbskit.volume",
-    "io": "nurbskit.io",
-    "losses": "nurbskit.losses",
-    "metrics": "nurbskit.metrics",
+    "project_points": ("nurbskit.core.project", "project_points"),
+    "tessellate": ("nurbskit.core.tessellate", "tessellate"),
+    "insert_knot": ("nurbskit.core.ops", "insert_knot"),
+    "refine_knots": ("nurbskit.core.ops", "refine_knots"),
+    "elevate_degree": ("nurbskit.core.ops", "elevate_degree"),
+    "split": ("nurbskit.core.ops", "split"),
+    "reverse": ("nurbskit.core.ops", "reverse"),
+    "decompose_bezier": ("nurbskit.core.ops", "decompose_bezier"),
+    "sample_mesh": ("nurbskit.geometry.sampling", "sample_mesh"),
+    "fit_surface": ("nurbskit.fit", "fit_surface"),
+    "fit_silhouettes": ("nurbskit.volume", "fit_silhouettes"),
+    "io": ("nurbskit.io", None),
+    "losses": ("nurbskit.losses", None),
+    "metrics": ("nurbskit.metrics", None),
 }
 
 
 def __getattr__(name: str):
     if name in _LAZY:
-        module = importlib.import_module(_LAZY[name])
-        return module if module.__name__.endswith("." + name) else getattr(module, name)
+        module_name, attribute = _LAZY[name]
+        module = importlib.import_module(module_name)
+        return module if attribute is None else getattr(module, attribute)
     raise AttributeError(f"module 'nurbskit' has no attribute {name!r}")
 
 
