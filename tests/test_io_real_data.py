@@ -214,9 +214,15 @@ def test_amsurface_geomdl_style_json(shared_data):
     np.testing.assert_array_equal(surface.control_points.numpy(), np.array(data["control_points"]["points"]))
 
 
+@pytest.fixture(scope="module")
+def kinect16(shared_data):
+    """Read once for the round trips (decoding LZF in pure Python takes about a second)."""
+    return read_points(shared_data / "kinect_scans/test16.pcd")
+
+
 @pytest.mark.parametrize("ext", [".ply", ".pcd", ".xyz", ".txt", ".csv", ".npy", ".npz", ".off", ".obj"])
-def test_real_clouds_round_trip_every_point_format(shared_data, tmp_path, ext):
-    cloud = read_points(shared_data / "kinect_scans/test16.pcd")
+def test_real_clouds_round_trip_every_point_format(kinect16, tmp_path, ext):
+    cloud = kinect16
     out = tmp_path / f"cloud{ext}"
     write_points(out, cloud.points, labels=cloud.labels if ext in (".ply", ".pcd", ".xyz", ".txt", ".csv", ".npz") else None)
     back = read_points(out)
