@@ -226,3 +226,22 @@ def test_two_gigabyte_file_that_does_not_fit(tmp_path, capsys, monkeypatch):
     assert rc == 2
     one_line_error(err, "two_gb.ply", "needs about 2.0 GB of memory but only 1.0 GB is available")
     assert not (tmp_path / "out.xyz").exists()
+
+
+def test_sample_nurbs_surface_on_a_grid(tmp_path, capsys):
+    import nurbskit
+    import torch
+
+    surface = nurbskit.NURBSSurface(torch.rand(4, 5, 3, dtype=torch.float64), (3, 2))
+    nurbskit.save(surface, tmp_path / "s.json")
+    rc, _, _ = run(capsys, "sample", tmp_path / "s.json", "--grid", 6, 7, "-o", tmp_path / "g.ply")
+    assert rc == 0
+    cloud = read_points(tmp_path / "g.ply")
+    expected = surface.sample((6, 7)).reshape(-1, 3).numpy()
+    np.testing.assert_array_equal(cloud.points, expected)  # u slowest, as evaluate_grid lays it out
+    np.testing.assert_allclose(np.linalg.norm(cloud.normals, axis=1), 1.0, atol=1e-12)
+    rc, _, _ = run(capsys, "sample", tmp_path / "s.json", "-n", 100, "-o", tmp_path / "n.xyz")
+    assert rc == 0 and read_points(tmp_path / "n.xyz").num_points == 100
+    rc, _, err = run(capsys, "sample", tmp_path / "s.json", "--grid", 6, "-o", tmp_path / "x.ply")
+    assert rc == 2
+    one_line_error(err, "--grid needs 2 positive integer(s) for a surface")

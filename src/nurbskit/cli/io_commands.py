@@ -43,15 +43,19 @@ def register(subparsers) -> None:
     _nurbs_options(p)
     p.set_defaults(run=run_convert)
 
-    p = subparsers.add_parser("sample", help="sample points on a mesh (Poisson-disk or uniform)",
-                              description="Sample N points on a triangle mesh and write them as a point file.")
-    p.add_argument("mesh", metavar="MESH", help="triangle mesh to sample")
-    p.add_argument("-n", type=int, required=True, help="number of points")
+    p = subparsers.add_parser("sample", help="sample points on a mesh (Poisson-disk or uniform) or a NURBS surface",
+                              description="Sample N points on a triangle mesh and write them as a point file. "
+                                          "Given a NURBS file instead, sample it on a uniform parametric grid "
+                                          "(the thesis's parametric sampling).")
+    p.add_argument("mesh", metavar="MESH", help="triangle mesh to sample (or a NURBS file: .json, .ctrlpts, ...)")
+    p.add_argument("-n", type=int, default=None, help="number of points (meshes: required; NURBS: about n, on a grid)")
     p.add_argument("--method", choices=("poisson", "uniform"), default="poisson",
                    help="poisson: blue noise, well spread (default); uniform: independent, area-weighted")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: fresh entropy)")
+    p.add_argument("--grid", type=int, nargs="+", metavar="R", help="NURBS: samples per parametric direction")
     p.add_argument("-o", "--output", required=True, help="point file to write (.ply, .xyz, .pcd, .npy, ...)")
-    p.add_argument("--no-normals", action="store_true", help="do not write the face normal of each sample")
+    p.add_argument("--no-normals", action="store_true", help="do not write the normal of each sample")
+    _nurbs_options(p)
     p.set_defaults(run=run_sample)
 
 
@@ -246,9 +250,17 @@ def run_sample(args) -> int:
     from ..io.mesh import read_mesh
     from ..io.points import write_points
 
-    if args.n < 1:
+    from ..io.nurbs import is_nurbs_file
+
+    if args.n is not None and args.n < 1:
         raise OptionError(f"-n must be a positive integer, got {args.n}")
     out = Path(args.output)
+    if is_nurbs_file(args.mesh):
+        return _sample_nurbs(args, out)
+    if args.n is None:
+        raise OptionError("-n is required to sample a mesh")
+    if args.grid:
+        raise OptionError("--grid applies to NURBS files; a mesh is sampled with -n and --method")
     with _progress(3, "sample") as bar:
         mesh = read_mesh(args.mesh)
         bar.update(1)
@@ -264,6 +276,38 @@ def run_sample(args) -> int:
         left = write_points(out, points, normals)
         bar.update(1)
     _note("sample", [x for x in left if x != "normals"] if args.no_normals else left, out)
+    return 0
+
+
+def _sample_nurbs(args, out: Path) -> int:
+    """Parametric sampling of a NURBS curve, surface or volume on a uniform grid."""
+    import math
+
+    from ..geometry.sampling import sample_parametric
+    from ..io.nurbs import read_nurbs
+    from ..io.points import write_points
+
+    obj = read_nurbs(args.mesh, **_nurbs_kwargs(args))
+    k = len(obj.sizes)
+    if args.grid:
+        if len(args.grid) != k or min(args.grid) < 1:
+            raise OptionError(f"--grid needs {k} positive integer(s) for a {obj.kind}, got {args.grid}")
+        grid = list(args.grid)
+    elif args.n is not None:
+        grid = [max(2, round(args.n ** (1.0 / k)))] * k
+    else:
+        raise OptionError("give -n (about n points) or --grid R [S [T]] to sample a NURBS file")
+    if math.prod(grid) > 50_000_000:
+        raise OptionError(f"--grid {grid} asks for {math.prod(grid):,} points; at most 50,000,000")
+    if obj.dim != 3:
+        raise OptionError(f"{args.mesh}: point files hold 3-D points; this {obj.kind} is {obj.dim}-D")
+    points = sample_parametric(obj, grid).detach().cpu().double().numpy()
+    normals = None
+    if obj.kind == "surface" and not args.no_normals:
+        u, v = obj.grid_axes(grid)
+        normals = obj.normals_grid(u, v).reshape(-1, 3).detach().cpu().double().numpy()
+    left = write_points(out, points, normals)
+    _note("sample", left, out)
     return 0
 
 
