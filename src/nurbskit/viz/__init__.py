@@ -1,6 +1,6 @@
 """Figures (matplotlib loads only when a plotting function is called)."""
 
-_NAMES = ("plot_wireframe", "plot_clouds", "plot_error_map", "plot_loss")
+_NAMES = ("plot_wireframe", "plot_clouds", "plot_error_map", "plot_loss", "plot_fit_panels")
 
 
 def __getattr__(name: str):

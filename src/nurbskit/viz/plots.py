@@ -142,3 +142,27 @@ def plot_loss(history: Sequence[dict], path: str | os.PathLike, alternation: Seq
         ax.legend()
     ax.grid(True, which="both", alpha=0.3)
     return _save(fig, path)
+
+
+def plot_fit_panels(points, panels: Sequence[tuple[str, object]], path: str | os.PathLike,
+                    title: str = "", columns: int = 4) -> Path:
+    """One panel per fit: the input ``(N, 3)`` in blue and each output grid ``(R, S, 3)`` as a wireframe.
+
+    ``panels`` is a sequence of ``(label, grid)``; used by the benchmarks to put the
+    thesis's pipelines side by side (its figures 6.3 and 6.4).
+    """
+    x = _subsample(_np(points), 4000)
+    n = max(len(panels), 1)
+    rows = (n + columns - 1) // columns
+    fig = _figure((4 * columns, 4 * rows))
+    for k, (label, grid) in enumerate(panels):
+        g = _np(grid)
+        ax = fig.add_subplot(rows, columns, k + 1, projection="3d")
+        ax.scatter(x[:, 0], x[:, 1], x[:, 2], s=0.5, c="tab:blue", alpha=0.4)
+        ax.plot_wireframe(g[..., 0], g[..., 1], g[..., 2], color="tab:green", linewidth=0.3)
+        _equal_axes(ax, x)
+        ax.set_title(label, fontsize=9)
+        ax.set_axis_off()
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
