@@ -40,6 +40,12 @@ def shared_file(shared_data: Path, relative: str) -> Path:
     return path
 
 
+# One intra-op thread: the tests' tensors are small, and on a busy 2-core machine
+# OpenMP threads waiting for a core stall even tiny operations (measured: a 10k-point
+# evaluation 20 ms with 1 thread, 170 ms with 2). Override with NURBSKIT_TEST_THREADS.
+torch.set_num_threads(int(os.environ.get("NURBSKIT_TEST_THREADS", "1")))
+
+
 @pytest.fixture(autouse=True)
 def _deterministic_torch():
     torch.set_default_dtype(torch.float32)

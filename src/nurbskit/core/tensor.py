@@ -30,7 +30,6 @@ from .basis import basis_function_derivatives, basis_functions, basis_matrix
 from .knots import find_spans
 
 Tensor = torch.Tensor
-_LETTERS = "abcdefgh"
 
 
 def homogeneous(control_points: Tensor, weights: Tensor) -> Tensor:
@@ -40,34 +39,47 @@ def homogeneous(control_points: Tensor, weights: Tensor) -> Tensor:
 
 
 def _gather_blocks(Pw: Tensor, spans: Sequence[Tensor], degrees: Sequence[int]) -> Tensor:
-    """Local control blocks ``(..., M, p_1 + 1, ..., p_k + 1, D)`` for each point."""
+    """Local control blocks ``(..., M, p_1 + 1, ..., p_k + 1, D)`` for each point.
+
+    One ``index_select`` on the flattened control net with a flat index built from the
+    spans (advanced indexing with k index tensors is far slower on CPU).
+    """
     k = len(degrees)
-    index = []
-    for a, (s, p) in enumerate(zip(spans, degrees)):
-        idx = s.unsqueeze(-1) - p + torch.arange(p + 1, device=s.device)  # (..., M, p+1)
+    sizes = Pw.shape[:k]
+    flat = None
+    stride = 1
+    for a in reversed(range(k)):
+        idx = spans[a].unsqueeze(-1) - degrees[a] + torch.arange(degrees[a] + 1, device=spans[a].device)
         shape = list(idx.shape[:-1]) + [1] * k
-        shape[idx.ndim - 1 + a] = p + 1
-        index.append(idx.reshape(shape))
-    return Pw[tuple(index)]
+        shape[idx.ndim - 1 + a] = degrees[a] + 1
+        term = idx.reshape(shape) * stride
+        flat = term if flat is None else flat + term
+        stride *= sizes[a]
+    D = Pw.shape[-1]
+    rows = Pw.reshape(-1, D).index_select(0, flat.reshape(-1))
+    return rows.reshape(flat.shape + (D,))
 
 
 def _contract(block: Tensor, bases: Sequence[Tensor], with_orders: bool) -> Tensor:
-    """Contract a local block with per-direction basis values.
+    """Contract a local block with per-direction basis values, one direction at a time.
 
-    ``bases[a]`` is ``(..., M, p_a + 1)`` or, ``with_orders``, ``(..., M, o + 1, p_a + 1)``;
-    the result is ``(..., M, D)`` or ``(..., M, o + 1, ..., o + 1, D)``.
+    ``block`` is ``(..., M, s_1, ..., s_k, D)``; ``bases[a]`` is ``(..., M, s_a)`` or, with
+    orders, ``(..., M, o + 1, s_a)``; the result is ``(..., M, D)`` or
+    ``(..., M, o + 1, ..., o + 1, D)``. Broadcast multiply-and-sum, last direction
+    first: these blocks are tiny, and a many-operand ``einsum`` plans badly for them.
     """
     k = len(bases)
-    cols = _LETTERS[:k]
-    orders = "stuvwxyz"[:k]
-    if with_orders:
-        terms = [f"...{o}{c}" for o, c in zip(orders, cols)]
-        out = f"...{orders}d"
-    else:
-        terms = [f"...{c}" for c in cols]
-        out = "...d"
-    expr = ",".join(terms + [f"...{cols}d"]) + "->" + out
-    return torch.einsum(expr, *bases, block)
+    X = block
+    for a in reversed(range(k)):
+        B = bases[a]
+        if with_orders:
+            after = k - 1 - a  # order axes already produced for later directions
+            Bv = B.reshape(B.shape[:-2] + (1,) * a + B.shape[-2:] + (1,) * (after + 1))
+            X = (X.unsqueeze(-(after + 3)) * Bv).sum(dim=-(after + 2))
+        else:
+            Bv = B.reshape(B.shape[:-1] + (1,) * a + B.shape[-1:] + (1,))
+            X = (X * Bv).sum(dim=-2)
+    return X
 
 
 def rational_derivatives(hders: Tensor, k: int) -> Tensor:
