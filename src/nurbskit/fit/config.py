@@ -96,6 +96,7 @@ class StageConfig:
     rematch_every: int = _f(0, "UM: recompute the one-to-one matching every N iterations (0: never)")
     reproject_every: int = _f(1, "recompute foot points for point_to_surface every N iterations")
     loss_threshold: float = _f(0.0, "stop the stage once the loss falls below this value")
+    plateau: float = _f(0.0, "stop once the loss fell by less than this fraction over the last 10 iterations (0: never)")
     eliminate_control_points: bool = _f(
         False,
         "supervised: solve the control points by (differentiable) least squares at every step and "
@@ -127,7 +128,9 @@ class AlternationConfig:
 
     rounds: int = _f(0, "rounds of projection + least squares before the gradient stages")
     smoothness: float = _f(1e-3, "relative weight of the control-net smoothness in each solve")
-    tolerance: float = _f(1e-7, "stop when the mean squared distance improves by less than this")
+    tolerance: float = _f(
+        1e-7, "stop when a round lowers the mean squared distance by less than this fraction of the first round's"
+    )
 
 
 @dataclass

@@ -194,11 +194,12 @@ def refresh_state(
 
                 state.foot = project_points(surface, target.points).params
             elif iteration % every == 0:
-                # Warm start from the last foot points, restarted from the nearest grid
-                # sample every few steps (a foot point can jump to another part of the surface).
+                # Warm start from the last foot points (the surface moves little per step),
+                # restarted from the nearest grid sample every 20 refreshes (a foot point can
+                # jump to another part of the surface).
                 state.foot = foot_points(
-                    surface, target.points, state.foot, params.closed_v, iterations=3,
-                    restart=iteration % (5 * every) == 0,
+                    surface, target.points, state.foot, params.closed_v, iterations=2,
+                    restart=iteration % (20 * every) == 0,
                 )
 
 
@@ -289,6 +290,10 @@ def run_stage(
             callback(Progress(stage.name, stage_index, it, stage.iters, record["loss"], record["parts"]))
         if stage.loss_threshold and record["loss"] < stage.loss_threshold:
             break
+        if stage.plateau and it >= 10:
+            before = history[-11]["loss"]
+            if before - record["loss"] < stage.plateau * abs(before):
+                break
     if stage.eliminate_control_points:
         with torch.no_grad():
             surface = params()

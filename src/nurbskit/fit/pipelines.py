@@ -217,13 +217,13 @@ def _default() -> FitConfig:
     return FitConfig(
         supervised=False,
         init=InitConfig(kind="auto", smoothness=1e-3),
-        alternation=AlternationConfig(rounds=25, smoothness=1e-3),
+        alternation=AlternationConfig(rounds=25, smoothness=1e-3, tolerance=1e-3),
         stages=[
             StageConfig(
                 name="refine", iters=60, optimizer="lbfgs", lr=1.0,
                 train_control_points=True, train_weights=True, train_knots=True,
                 loss=LossWeights(point_to_surface=1.0, coverage=0.3, smoothness=1e-5),
-                reproject_every=1,
+                reproject_every=1, plateau=0.03,
             )
         ],
     )
