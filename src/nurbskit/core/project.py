@@ -40,8 +40,6 @@ import torch
 
 from ..errors import NurbskitError
 from . import tensor as _tp
-from .basis import basis_function_derivatives
-from .knots import find_spans
 
 Tensor = torch.Tensor
 
@@ -63,35 +61,9 @@ class Projection(NamedTuple):
 # the local quadratic model
 # ----------------------------------------------------------------------------------------
 def _derivatives2(spline, Pw: Tensor, t: Tensor) -> Tensor:
-    """Derivatives up to second order at ``t (M, k)``: ``(M, 3, dim)`` or ``(M, 3, 3, dim)``.
-
-    The same computation as ``spline.derivatives(t, order=2)`` (spans, A2.3 basis
-    derivatives, a gather of the local homogeneous block, the quotient rule), with the
-    homogeneous points ``Pw`` formed once per projection rather than once per iteration,
-    and the block contracted by batched matrix products, which are several times faster
-    on small per-point blocks than a three-operand ``einsum``.
-    """
-    spans, bases = [], []
-    for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
-        s = find_spans(kv, p, n, t[:, a])
-        spans.append(s)
-        bases.append(basis_function_derivatives(kv, p, s, t[:, a], 2))  # (M, 3, p + 1)
-    # the local control block (M, p + 1[, q + 1], D) through one flat index_select
-    m, D = t.shape[0], Pw.shape[-1]
-    flat = Pw.reshape(-1, D)
-    rows = [sp.unsqueeze(-1) - p + torch.arange(p + 1, device=sp.device) for sp, p in zip(spans, spline.degrees)]
-    if spline.para_dim == 1:
-        index = rows[0]
-    else:
-        index = rows[0].unsqueeze(-1) * spline.sizes[1] + rows[1].unsqueeze(-2)
-    block = flat.index_select(0, index.reshape(-1)).reshape(index.shape + (D,))
-    if spline.para_dim == 1:
-        h = bases[0] @ block  # (M, 3, D)
-    else:
-        (p, q) = spline.degrees
-        h = (bases[0] @ block.reshape(m, p + 1, (q + 1) * D)).reshape(m, 3, q + 1, D)
-        h = bases[1].unsqueeze(1) @ h  # (M, 1, 3, q + 1) @ (M, 3, q + 1, D) -> (M, 3, 3, D)
-    return _tp.rational_derivatives(h, spline.para_dim)
+    """Derivatives up to second order at ``t (M, k)``: ``(M, 3, dim)`` or ``(M, 3, 3, dim)``,
+    from homogeneous points ``Pw`` formed once per projection rather than once per iteration."""
+    return _tp.derivatives_from_homogeneous(Pw, spline.knot_vectors, spline.degrees, t, 2)
 
 
 _J_ROWS = torch.tensor([3, 1])

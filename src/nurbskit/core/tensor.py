@@ -21,6 +21,7 @@ Derivatives of the rational map use the generalised quotient rule
 from __future__ import annotations
 
 import itertools
+import math
 from math import comb
 from typing import Sequence
 
@@ -60,29 +61,48 @@ def _gather_blocks(Pw: Tensor, spans: Sequence[Tensor], degrees: Sequence[int]) 
     return rows.reshape(flat.shape + (D,))
 
 
-def _contract(block: Tensor, bases: Sequence[Tensor], with_orders: bool) -> Tensor:
-    """Contract a local block with per-direction basis values, one direction at a time.
+def _contract(block: Tensor, bases: Sequence[Tensor]) -> Tensor:
+    """Contract local blocks with per-direction basis values, one direction at a time.
 
-    ``block`` is ``(..., M, s_1, ..., s_k, D)``; ``bases[a]`` is ``(..., M, s_a)`` or, with
-    orders, ``(..., M, o + 1, s_a)``; the result is ``(..., M, D)`` or
-    ``(..., M, o + 1, ..., o + 1, D)``. Broadcast multiply-and-sum, last direction
-    first: these blocks are tiny, and a many-operand ``einsum`` plans badly for them.
+    Shapes: ``block (M, s_1, ..., s_k, D)``, ``bases[a] (M, o + 1, s_a)`` ->
+    ``(M, o + 1, ..., o + 1, D)``. Each step is one batched matrix product
+    ``(M, 1, o + 1, s_a) @ (M, O, s_a, rest)``; on these tiny per-point blocks that beats
+    both a many-operand ``einsum`` and broadcast multiply-and-sum.
     """
-    k = len(bases)
+    M = block.shape[0]
+    orders = [B.shape[-2] for B in bases]
     X = block
-    for a in reversed(range(k)):
-        B = bases[a]
-        if with_orders:
-            after = k - 1 - a  # order axes already produced for later directions
-            Bv = B.reshape(B.shape[:-2] + (1,) * a + B.shape[-2:] + (1,) * (after + 1))
-            X = (X.unsqueeze(-(after + 3)) * Bv).sum(dim=-(after + 2))
+    done = 1  # product of the order axes produced so far
+    for a, B in enumerate(bases):
+        s_a = B.shape[-1]
+        rest = math.prod(block.shape[a + 2 :])  # explicit: M may be 0
+        X = torch.matmul(B.unsqueeze(1), X.reshape(M, done, s_a, rest))  # (M, done, o + 1, rest)
+        done *= B.shape[-2]
+    return X.reshape((M, *orders, block.shape[-1]))
+
+
+def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None) -> Tensor:
+    """Homogeneous values (``order`` None) or derivatives at ``params (..., M, k)``."""
+    k = len(degrees)
+    lead = params.shape[:-1]
+    flat = params.reshape(-1, k)
+    sizes = Pw.shape[:k]
+    spans, bases = [], []
+    for a in range(k):
+        u = flat[:, a]
+        s = find_spans(knot_vectors[a], degrees[a], sizes[a], u)
+        spans.append(s)
+        if order is None:
+            bases.append(basis_functions(knot_vectors[a], degrees[a], s, u).unsqueeze(-2))
         else:
-            Bv = B.reshape(B.shape[:-1] + (1,) * a + B.shape[-1:] + (1,))
-            X = (X * Bv).sum(dim=-2)
-    return X
+            bases.append(basis_function_derivatives(knot_vectors[a], degrees[a], s, u, order))
+    h = _contract(_gather_blocks(Pw, spans, degrees), bases)
+    if order is None:
+        h = h.reshape(h.shape[0], h.shape[-1])
+    return h.reshape(lead + h.shape[1:])
 
 
-def rational_derivatives(hders: Tensor, k: int) -> Tensor:
+def homogeneous_derivatives_to_points(hders: Tensor, k: int) -> Tensor:
     """Quotient rule on homogeneous derivatives.
 
     Shapes: ``hders (..., o + 1, ... (k times), D)`` holding derivatives of ``(w P, w)``
@@ -123,16 +143,7 @@ def evaluate(
     Shapes: ``control_points (n_1, ..., n_k, dim)``, ``weights (n_1, ..., n_k)``,
     ``params (..., M, k)`` -> ``(..., M, dim)``.
     """
-    k = len(degrees)
-    Pw = homogeneous(control_points, weights)
-    sizes = control_points.shape[:k]
-    spans, bases = [], []
-    for a in range(k):
-        u = params[..., a]
-        s = find_spans(knot_vectors[a], degrees[a], sizes[a], u)
-        spans.append(s)
-        bases.append(basis_functions(knot_vectors[a], degrees[a], s, u))
-    h = _contract(_gather_blocks(Pw, spans, degrees), bases, with_orders=False)
+    h = _local(homogeneous(control_points, weights), knot_vectors, degrees, params, None)
     return h[..., :-1] / h[..., -1:]
 
 
@@ -150,17 +161,17 @@ def derivatives(
     entry ``[..., a, b, :]`` of a surface is the derivative ``a`` times in u and ``b``
     times in v; ``[..., 0, 0, :]`` is the point itself.
     """
-    k = len(degrees)
-    Pw = homogeneous(control_points, weights)
-    sizes = control_points.shape[:k]
-    spans, bases = [], []
-    for a in range(k):
-        u = params[..., a]
-        s = find_spans(knot_vectors[a], degrees[a], sizes[a], u)
-        spans.append(s)
-        bases.append(basis_function_derivatives(knot_vectors[a], degrees[a], s, u, order))
-    hders = _contract(_gather_blocks(Pw, spans, degrees), bases, with_orders=True)
-    return rational_derivatives(hders, k)
+    return homogeneous_derivatives_to_points(
+        _local(homogeneous(control_points, weights), knot_vectors, degrees, params, order), len(degrees)
+    )
+
+
+def derivatives_from_homogeneous(
+    Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int
+) -> Tensor:
+    """:func:`derivatives` from homogeneous control points ``Pw (n_1..n_k, dim + 1)``
+    formed once by the caller (iterative solvers evaluate the same spline many times)."""
+    return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order), len(degrees))
 
 
 def _mode_products(Pw: Tensor, matrices: Sequence[Tensor]) -> Tensor:
@@ -210,4 +221,4 @@ def evaluate_grid(
     h = h.reshape([Pw.shape[-1]] + sum(([order + 1, r] for r in lengths), []))
     # (D, o, R_1, o, R_2, ...) -> (R_1, ..., R_k, o, ..., o, D)
     perm = [2 * a + 2 for a in range(k)] + [2 * a + 1 for a in range(k)] + [0]
-    return rational_derivatives(h.permute(perm), k)
+    return homogeneous_derivatives_to_points(h.permute(perm), k)
