@@ -197,3 +197,20 @@ def test_matching_naive_is_exhaustive():
     best = min(sum((float(pred[i]) - float(target[j])) ** 2 for i, j in enumerate(p)) for p in itertools.permutations(range(3)))
     idx = one_to_one_matching_naive(pred, target)
     assert matching_cost(pred, target, idx) == pytest.approx(best)
+
+
+def test_equidistributed_knots_follow_the_bending():
+    from nurbskit.fit.lstsq import equidistributed_knots
+
+    t = torch.linspace(0, 1, 64, dtype=F64)
+    u, v = torch.meshgrid(t, t, indexing="ij")
+    # Bends only near u = 1 (exp), and not at all along v (linear).
+    g = torch.stack([u, v, torch.exp(6 * u) / 400], -1)
+    ku = equidistributed_knots(g, 0, 10, 3)
+    kv = equidistributed_knots(g, 1, 10, 3)
+    assert ku.numel() == 14 and torch.all(ku[1:] >= ku[:-1])
+    assert torch.equal(ku[:4], torch.zeros(4, dtype=F64)) and torch.equal(ku[-4:], torch.ones(4, dtype=F64))
+    inner_u, inner_v = ku[4:-4], kv[4:-4]
+    assert float(inner_u.mean()) > 0.55  # crowded towards u = 1
+    # No bending along v: the floor spreads the knots evenly.
+    assert torch.allclose(inner_v, torch.linspace(0, 1, 8, dtype=F64)[1:-1], atol=0.02)

@@ -97,6 +97,11 @@ class StageConfig:
     reproject_every: int = _f(1, "recompute foot points for point_to_surface every N iterations")
     loss_threshold: float = _f(0.0, "stop the stage once the loss falls below this value")
     plateau: float = _f(0.0, "stop once the loss fell by less than this fraction over the last 10 iterations (0: never)")
+    relocate_knots: bool = _f(
+        False,
+        "supervised: before the stage, move the interior knots to equidistribute the target's "
+        "(p+1)-th differences (de Boor's knot placement)",
+    )
     eliminate_control_points: bool = _f(
         False,
         "supervised: solve the control points by (differentiable) least squares at every step and "

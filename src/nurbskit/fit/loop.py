@@ -39,7 +39,8 @@ from .. import losses as L
 from ..errors import OptionError
 from ..geometry.neighbors import nearest_neighbors
 from .config import StageConfig
-from .lstsq import foot_points, solve_control_points
+from ..core.knots import knots_to_logits
+from .lstsq import equidistributed_knots, foot_points, solve_control_points
 from .matching import one_to_one_matching
 from .params import SurfaceParameters
 
@@ -203,6 +204,30 @@ def refresh_state(
                 )
 
 
+def relocate_knots(params: SurfaceParameters, target: Target) -> None:
+    """Move the interior knots by :func:`~nurbskit.fit.lstsq.equidistributed_knots` of the target grid.
+
+    Along a closed v the knots stay uniform. The control points are then re-solved by
+    least squares at the new knots, so the surface stays close to the target.
+    """
+    if not target.supervised:
+        raise OptionError("relocate_knots needs a supervised (ordered grid) target")
+    p, q = params.degrees
+    with torch.no_grad():
+        ku = equidistributed_knots(target.grid, 0, params.n_u, p)
+        new = [ku, params.fixed_knots_v.clone()]
+        if not params.closed_v:
+            new[1] = equidistributed_knots(target.grid, 1, params.n_v, q)
+        for kv, buf, logits, deg, n in (
+            (new[0], params.fixed_knots_u, params.knot_logits_u, p, params.n_u),
+            (new[1], params.fixed_knots_v, params.knot_logits_v, q, params.n_v),
+        ):
+            buf.copy_(kv.to(buf))
+            logits.copy_(knots_to_logits(kv.to(buf), deg, n))
+        surface = params()
+        params.load_control_points(eliminated_control_points(surface, target, params.topology))
+
+
 def grid_parameters(surface, resolution: tuple[int, int]) -> Tensor:
     """The ``(R * S, 2)`` parameters of the uniform grid, u slowest (``surface.sample`` order)."""
     gu, gv = surface.grid_axes(resolution)
@@ -250,6 +275,8 @@ def run_stage(
     Each record is ``{"stage", "iteration", "loss", "parts"}`` with the loss *before*
     that iteration's step. ``params`` is updated in place.
     """
+    if stage.relocate_knots:
+        relocate_knots(params, target)
     params.set_trainable(stage.train_control_points, stage.train_weights, stage.train_knots)
     tensors = params.trainable()
     history: list[dict] = []

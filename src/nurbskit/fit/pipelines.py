@@ -74,17 +74,19 @@ def _unsupervised(init: str, stage: StageConfig) -> FitConfig:
 
 @register("SB", True, "L2; control points, weights and knots train from random control points and uniform knots")
 def _sb() -> FitConfig:
-    # The NURBS-Diff duck recipe (L2, everything trains, random start). Its Adam run
-    # stalls because the knots hardly move; here the same objective is minimised by
-    # L-BFGS with the control points eliminated by least squares (variable
-    # projection), then all three polished together.
+    # The NURBS-Diff duck recipe (L2, everything trains, random start, uniform knots).
+    # Its run stalls because the knots hardly move; here the knots first jump to where
+    # the target bends (de Boor's equidistribution of the (p+1)-th differences), then
+    # the same objective is minimised by L-BFGS on knots and weights with the control
+    # points eliminated by least squares (variable projection), then all three
+    # polished together.
     return FitConfig(
         supervised=True,
         init=InitConfig(kind="random"),
         stages=[
             StageConfig(name="knots", iters=150, optimizer="lbfgs", lr=1.0, train_control_points=False,
                         train_weights=True, train_knots=True, eliminate_control_points=True,
-                        loss=LossWeights(l2=1.0)),
+                        relocate_knots=True, loss=LossWeights(l2=1.0)),
             StageConfig(name="polish", iters=50, optimizer="lbfgs", lr=1.0, train_weights=True,
                         train_knots=True, loss=LossWeights(l2=1.0)),
         ],
