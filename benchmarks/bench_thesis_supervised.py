@@ -8,7 +8,8 @@ the same grid: RMS distance divided by the target's bounding-box diagonal.
 Rows:
 
 * SB (ours: L2; control points, weights and knots train from random control points
-  and uniform knots; L-BFGS with the control points eliminated by least squares,
+  and uniform knots; knots relocated by de Boor's rule, then L-BFGS with the control
+  points eliminated by least squares,
   150 + 50 iterations);
 * SC (L2, control points only, knots and weights the target's; least-squares start)
   and SC from random control points (the thesis's start; 400 L-BFGS iterations);
