@@ -77,6 +77,7 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
         (["--pipeline", "SC"], "supervised"),
         (["--device", "tpu"], "--device"),
         (["--lr", "0"], "--lr"),
+        (["--threads", "0"], "--threads"),
     ],
 )
 def test_bad_options_are_one_line_errors(cloud, tmp_path, capsys, extra, message):

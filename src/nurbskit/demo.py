@@ -125,7 +125,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="out", help="output folder (its duck/ and fit/ are replaced)")
     parser.add_argument("--data", default=None, help="folder holding thesis_nurbsdiff/ (default ../shared/data)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1: the demo's problems are small, and extra threads "
+                             "only add synchronisation, badly so on a busy machine)")
     args = parser.parse_args(argv)
+    if args.threads < 1:
+        parser.error(f"--threads must be >= 1, got {args.threads}")
+    torch.set_num_threads(args.threads)
     out = Path(args.out)
     t0 = time.perf_counter()
 

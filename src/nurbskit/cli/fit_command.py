@@ -68,6 +68,8 @@ def register(subparsers) -> None:
     p.add_argument("--device", default="cpu", help=_help(FitConfig, "device"))
     p.add_argument("--dtype", choices=("float32", "float64"), default="float64", help=_help(FitConfig, "dtype"))
     p.add_argument("--seed", type=int, default=0, help=_help(FitConfig, "seed"))
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="torch CPU threads (default: torch's choice); 1 is often fastest for small clouds on a busy machine")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (faster)")
@@ -117,6 +119,12 @@ def run_fit(args) -> int:
         raise OptionError(f"--iters must be >= 0, got {args.iters}")
     if args.lr is not None and not args.lr > 0:
         raise OptionError(f"--lr must be positive, got {args.lr}")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise OptionError(f"--threads must be >= 1, got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
     if args.device.startswith("cuda"):
         import torch
 
