@@ -240,3 +240,12 @@ def test_bad_inputs_give_clear_errors():
         fit_surface(torch.full((50, 3), float("nan"), dtype=F64), "UC")
     with pytest.raises(NurbskitError, match="coincide"):
         fit_surface(torch.ones(50, 3, dtype=F64), "UC")
+
+
+def test_sparse_flat_sheet_is_not_closed():
+    # 300 points on a unit square: neighbours in the projection are far apart in absolute
+    # terms, but no farther in 3D than in the projection.
+    g = _gen(11)
+    flat = torch.cat([torch.rand(300, 2, generator=g, dtype=F64), torch.zeros(300, 1, dtype=F64)], -1)
+    assert not looks_closed(flat)
+    assert not looks_closed(torch.rand(10, 3, generator=g, dtype=F64))

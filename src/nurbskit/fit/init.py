@@ -123,10 +123,11 @@ def looks_closed(points: Tensor, neighbours: int = 8, threshold: float = 0.25) -
     """Whether a cloud wraps around (closed shape) rather than being a sheet.
 
     Projects the points onto their best-fitting plane and checks whether the points
-    that are close in the projection are also close in 3D: on a sheet they are; on a
-    closed surface the front and back sides overlap in projection. Returns True when
-    more than ``threshold`` of the projected neighbours lie more than 5 % of the
-    bounding-box diagonal away in 3D.
+    that are close in the projection are also close in 3D: on a sheet they are (the
+    3D distance exceeds the projected one only through the sheet's slope); on a closed
+    surface the front and back sides overlap in projection. Returns True when more
+    than ``threshold`` of the projected neighbours are more than 2.5 times (plus 1 %
+    of the bounding-box diagonal) farther away in 3D than in the projection.
     """
     from scipy.spatial import cKDTree
 
@@ -137,8 +138,9 @@ def looks_closed(points: Tensor, neighbours: int = 8, threshold: float = 0.25) -
     _, _, vt = np.linalg.svd(x - center, full_matrices=False)
     xy = (x - center) @ vt[:2].T
     diag = float(np.linalg.norm(x.max(0) - x.min(0)))
-    _, idx = cKDTree(xy).query(xy, k=neighbours + 1)
-    far = np.linalg.norm(x[idx[:, 1:]] - x[:, None, :], axis=-1) > 0.05 * diag
+    d2, idx = cKDTree(xy).query(xy, k=neighbours + 1)
+    d3 = np.linalg.norm(x[idx[:, 1:]] - x[:, None, :], axis=-1)
+    far = d3 > 2.5 * d2[:, 1:] + 0.01 * diag
     return bool(far.mean() > threshold)
 
 
