@@ -15,6 +15,8 @@ from .init import initial_surface, looks_closed
 from .loop import Progress, Target, run_stage
 from .lstsq import alternate, solve_control_points
 from .matching import one_to_one_matching
+from .outputs import fit_report, write_fit_outputs
+from .params import SurfaceParameters, Topology
 from .pipelines import PIPELINES, get_pipeline
 
 __all__ = [
@@ -23,4 +25,5 @@ __all__ = [
     "config_to_dict", "config_from_dict",
     "initial_surface", "looks_closed", "solve_control_points", "alternate", "one_to_one_matching",
     "run_stage", "Progress", "Target", "PIPELINES", "get_pipeline",
+    "fit_report", "write_fit_outputs", "SurfaceParameters", "Topology",
 ]
