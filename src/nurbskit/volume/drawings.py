@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Union
+from typing import TYPE_CHECKING, Union
 
 import numpy as np
 import torch
@@ -21,7 +21,10 @@ from ..errors import InputError
 from .views import View, image_to_plane
 
 Tensor = torch.Tensor
-DrawingLike = Union[str, os.PathLike, np.ndarray, Tensor, "PIL.Image.Image"]  # noqa: F821
+if TYPE_CHECKING:
+    from PIL.Image import Image as PILImage
+
+DrawingLike = Union[str, os.PathLike, np.ndarray, Tensor, "PILImage"]
 
 #: Gray-level spread (0..1) below which an image counts as having no shape at all.
 MIN_CONTRAST = 0.05

@@ -20,10 +20,9 @@ All costs are means over the grid, i.e. the integrals over the unit cube of the 
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import torch
-import torch.nn.functional as F
 
 from .views import VIEWS, View, extrude
 
@@ -50,18 +49,6 @@ def paper_shape_cost(field: Tensor, hull: Tensor) -> Tensor:
 def smoothness_cost(laplacian: Tensor) -> Tensor:
     """Eq. 3 squared: ``mean (lap f)^2`` over the grid; ``(R, S, T)`` -> scalar."""
     return torch.mean(laplacian**2)
-
-
-def span_scale(knot_vectors: Sequence[Tensor], degrees: Sequence[int], sizes: Sequence[int]) -> tuple[float, ...]:
-    """Mean knot-span width per direction, ``(domain length) / (n - p)``.
-
-    The Laplacian is multiplied by ``span^2`` per direction: second differences of the
-    control values, roughly, which do not grow as the grid gets finer.
-    """
-    out = []
-    for kv, p, n in zip(knot_vectors, degrees, sizes):
-        out.append(float(kv[n].detach() - kv[p].detach()) / (n - p))
-    return tuple(out)
 
 
 def soft_projection(field: Tensor, view: View, isovalue: float, sharpness: float) -> Tensor:
