@@ -162,6 +162,8 @@ def run_fit(args) -> int:
         if args.laplacian_on is not None:
             s.loss.laplacian_on = args.laplacian_on
     cfg.validate()
+    if cfg.init.kind == "target" and not cfg.supervised:
+        raise OptionError(f"--init target (the target's knots and weights) needs a supervised pipeline; {cfg.pipeline} is not")
 
     kwargs = {}
     if cfg.supervised:

@@ -191,6 +191,10 @@ def fit_surface(
             surface = surface._replace(control_points=eliminated_control_points(surface, target, Topology()))
         topology = Topology()
     else:
+        if cfg.init.kind == "target":
+            raise OptionError(
+                "init 'target' (the target's knots and weights) needs a supervised pipeline and a NURBS or grid target"
+            )
         surface, topology = initial_surface(
             xn, cfg.init.kind, ctrl, degree, cfg.init.closed, cfg.init.smoothness, generator=gen
         )
