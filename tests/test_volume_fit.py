@@ -153,3 +153,18 @@ def test_zero_tolerance_runs_every_iteration(sphere_box):
     d = sphere_box
     result = fit_silhouettes(d["front"], d["left"], d["top"], control_size=12, grid=8, iterations=15, tolerance=0.0)
     assert result.iterations == 15
+
+
+def test_history_holds_one_cost_per_iteration(sphere_box):
+    d = sphere_box
+    seen = []
+    result = fit_silhouettes(
+        d["front"], d["left"], d["top"], control_size=8, grid=10, iterations=12, tolerance=0.0,
+        callback=lambda stage, done, total, cost: seen.append((stage, done, cost)),
+    )
+    assert result.iterations == 12 and len(result.history) == 13
+    assert [s[1] for s in seen if s[0] == "fit"] == list(range(1, 13))
+    assert [s[2] for s in seen if s[0] == "fit"] == result.history[1:]
+    assert result.history[-1] == result.costs["total"]
+    # L-BFGS with a strong Wolfe line search accepts only decreasing steps
+    assert all(b <= a * (1 + 1e-6) for a, b in zip(result.history, result.history[1:]))

@@ -33,8 +33,8 @@ Tensor = torch.Tensor
 LOSSES = ("paper", "silhouette")
 INITS = ("zeros", "hull")
 SMOOTH_SAMPLES = ("auto", "grid")
-#: ``callback(stage, done, total, cost)``: stage 'fit' once per L-BFGS iteration (cost is
-#: the total cost), then 'mesh' once (cost None).
+#: ``callback(stage, done, total, cost)``: stage 'fit' after each L-BFGS iteration ``done``
+#: of at most ``total`` (cost: the total cost), then 'mesh' once (cost None).
 ProgressCallback = Callable[[str, int, int, "float | None"], None]
 
 
@@ -340,9 +340,16 @@ def fit_silhouettes(
             shape = silhouette_cost(f, planes, cfg.isovalue, cfg.sharpness)
         return cfg.shape_weight * shape + cfg.smooth_weight * smooth, shape, smooth, f
 
+    # history[0]: the initial cost; history[k]: the cost after L-BFGS iteration k.
     history: list[float] = []
     evaluations = 0
     iterations_run = 0
+
+    def report(done: int, cost: float) -> None:
+        history.append(cost)
+        if callback is not None:
+            callback("fit", done, cfg.iterations, cost)
+
     if cfg.iterations > 0:
         optimizer = torch.optim.LBFGS(
             [values, log_weights],
@@ -355,28 +362,35 @@ def fit_silhouettes(
             line_search_fn="strong_wolfe",
         )
         state = optimizer.state[values]
+        last = [0.0]
 
         def closure():
             nonlocal evaluations
+            # torch's L-BFGS increments n_iter before iteration n's line search, so when
+            # it reads n, iterations up to n - 1 are finished; the line search ends on
+            # the accepted point, whose cost was the previous evaluation.
+            started = int(state.get("n_iter", 0))
+            while started > 0 and len(history) < started:
+                report(len(history), last[0])
             optimizer.zero_grad(set_to_none=True)
             total = costs()[0]
             total.backward()
             evaluations += 1
-            # n_iter counts finished iterations; the first evaluation of each is its start.
-            done = int(state.get("n_iter", 0))
-            if len(history) == done:
-                history.append(float(total.detach()))
-                if callback is not None and done > 0:
-                    callback("fit", done, cfg.iterations, history[-1])
+            last[0] = float(total.detach())
+            if not history:
+                history.append(last[0])  # the initial cost
             return total
 
         optimizer.step(closure)
         iterations_run = int(state.get("n_iter", 0))
     with torch.no_grad():
         total, shape, smooth, f = costs()
+    if not history:
         history.append(float(total))
-    if callback is not None:
-        callback("fit", cfg.iterations, cfg.iterations, float(total))
+    while len(history) < iterations_run:
+        report(len(history), last[0])
+    if iterations_run > 0:
+        report(iterations_run, float(total))
     t_fit = time.perf_counter()
 
     volume = NURBSVolume(
