@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import numpy as np
 import pytest
@@ -18,13 +17,6 @@ F64 = torch.float64
 ALL = {"surface.json", "points.off", "control_points.off", "report.json", "config.json",
        "wireframe.png", "clouds.png", "error_map.png", "loss.png"}
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 
 @pytest.fixture

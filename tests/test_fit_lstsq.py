@@ -15,15 +15,6 @@ from nurbskit.fit.params import SurfaceParameters, Topology, expand, new_surface
 F64 = torch.float64
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # The fit tests run many small torch ops; one thread avoids oversubscribing a shared machine.
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 def _gen(seed=0):
     return torch.Generator().manual_seed(seed)
 

@@ -20,13 +20,6 @@ OUTPUT_FILES = {"surface.json", "points.off", "control_points.off", "report.json
                 "wireframe.png", "clouds.png", "error_map.png", "loss.png"}
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
 
 def _gen(seed):
     return torch.Generator().manual_seed(seed)
