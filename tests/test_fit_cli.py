@@ -117,7 +117,8 @@ def test_demo_without_shared_data(tmp_path, capsys):
 
     out = tmp_path / "out"
     assert demo(["--out", str(out), "--data", str(tmp_path / "nowhere"), "--no-figures"]) == 0
-    assert {p.name for p in (out / "duck").iterdir()} == {"duck.json", "duck_points.off", "duck.obj"}
+    assert {p.name for p in (out / "egg").iterdir()} == {"egg.json", "egg_points.off", "egg.obj"}
+    assert not (out / "duck").exists()  # no duck without the thesis data
     assert {"surface.json", "points.off", "control_points.off", "report.json", "config.json"} <= {p.name for p in (out / "fit").iterdir()}
     assert "built-in" in capsys.readouterr().out
     # A second run replaces the outputs.

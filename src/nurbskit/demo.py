@@ -10,7 +10,8 @@ Run as ``python -m nurbskit.demo --out out``. It writes
 
 The duck comes from ``../shared/data/thesis_nurbsdiff/ducky`` beside the repository
 when that folder exists; otherwise a built-in closed shape (a bumpy egg) stands in
-for it. Every run replaces ``out/duck`` and ``out/fit``.
+for it, written to ``out/egg/`` as ``egg.*``. Every run replaces those folders and
+``out/fit``.
 """
 
 from __future__ import annotations
@@ -122,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     from .fit.outputs import write_fit_outputs
 
     parser = argparse.ArgumentParser(prog="python -m nurbskit.demo", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="out", help="output folder (its duck/ and fit/ are replaced)")
+    parser.add_argument("--out", default="out", help="output folder (its duck/ or egg/, and fit/, are replaced)")
     parser.add_argument("--data", default=None, help="folder holding thesis_nurbsdiff/ (default ../shared/data)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--threads", type=int, default=1,
@@ -139,10 +140,10 @@ def main(argv: list[str] | None = None) -> int:
     if thesis is not None:
         shape, name, source = load_duck(thesis), "duck", f"the thesis duck from {thesis / 'ducky'}"
     else:
-        shape, name, source = builtin_shape(), "duck", "a built-in closed shape (../shared/data not found)"
-    with output_directory(out / "duck", overwrite=True) as tmp:
+        shape, name, source = builtin_shape(), "egg", "a built-in closed shape, a bumpy egg (../shared/data not found)"
+    with output_directory(out / name, overwrite=True) as tmp:
         files = export_surface(shape, tmp, name)
-    print(f"[1/2] {source}: wrote {out / 'duck'}/ ({', '.join(files)})")
+    print(f"[1/2] {source}: wrote {out / name}/ ({', '.join(files)})")
 
     points = poisson_sample(shape, 900, seed=0)
     result = fit_surface(points, "default")
