@@ -242,3 +242,31 @@ def test_sparse_flat_sheet_is_not_closed():
     flat = torch.cat([torch.rand(300, 2, generator=g, dtype=F64), torch.zeros(300, 1, dtype=F64)], -1)
     assert not looks_closed(flat)
     assert not looks_closed(torch.rand(10, 3, generator=g, dtype=F64))
+
+
+def test_large_inputs_are_fitted_on_a_seeded_subset_and_reported_in_full(monkeypatch):
+    import nurbskit.fit.api as api
+
+    seen = []
+    original = api.initial_surface
+
+    def spy(points, *args, **kwargs):
+        seen.append(points.shape[0])
+        return original(points, *args, **kwargs)
+
+    monkeypatch.setattr(api, "initial_surface", spy)
+    pts, _ = smooth_patch(3000, 0.001, seed=3)
+    cfg = get_pipeline("default").with_iters(4)
+    cfg.max_points = 500
+    cfg.alternation = dataclasses.replace(cfg.alternation, rounds=2)
+    result = fit_surface(pts, cfg)
+    assert seen == [500]  # the fit saw the subset
+    assert result.points.shape[0] == 3000  # the report measures every point
+    report = fit_report(result)
+    assert report["points"] == 3000 and report["metrics_normalized"]["to_surface_mean"] < 0.01
+    cfg.max_points = 0  # 0: all points
+    fit_surface(pts, cfg)
+    assert seen[-1] == 3000
+    cfg.max_points = 2
+    with pytest.raises(OptionError, match="max_points"):
+        fit_surface(pts, cfg)

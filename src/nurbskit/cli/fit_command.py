@@ -68,6 +68,8 @@ def register(subparsers) -> None:
     p.add_argument("--device", default="cpu", help=_help(FitConfig, "device"))
     p.add_argument("--dtype", choices=("float32", "float64"), default="float64", help=_help(FitConfig, "dtype"))
     p.add_argument("--seed", type=int, default=0, help=_help(FitConfig, "seed"))
+    p.add_argument("--max-points", type=int, default=None, metavar="N",
+                   help=_help(FitConfig, "max_points") + " (default 20000)")
     p.add_argument("--threads", type=int, default=None, metavar="N",
                    help="torch CPU threads (default: torch's choice); 1 is often fastest for small clouds on a busy machine")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
@@ -146,6 +148,8 @@ def run_fit(args) -> int:
             f"(R, S, 3), got a point cloud ({args.input})"
         )
     cfg = dataclasses.replace(cfg, resolution=resolution, seed=args.seed, device=args.device, dtype=args.dtype)
+    if args.max_points is not None:
+        cfg.max_points = args.max_points
     if ctrl is not None:
         cfg.ctrl = ctrl
     if degree is not None:

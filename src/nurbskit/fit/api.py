@@ -162,6 +162,12 @@ def fit_surface(
     else:
         center, scale = torch.zeros(3, dtype=dtype, device=device), 1.0
     xn = (pts - center) / scale
+    if grid is None and cfg.max_points > 0 and xn.shape[0] > cfg.max_points:
+        # Every step projects every fitted point, so the cost grows with the scan; a seeded
+        # random subset bounds it (a 189k-point Kinect scan: 147 s -> 16 s of fitting). The
+        # report still measures all input points (FitResult.points).
+        pick = torch.randperm(xn.shape[0], generator=torch.Generator().manual_seed(int(cfg.seed)))
+        xn = xn[pick[: int(cfg.max_points)].to(xn.device)]
     target = Target(
         points=xn,
         grid=None if grid is None or not cfg.supervised else (grid - center) / scale,

@@ -153,6 +153,11 @@ class FitConfig:
     alternation: AlternationConfig = field(default_factory=AlternationConfig, metadata={"help": "alternation"})
     stages: list[StageConfig] = field(default_factory=list, metadata={"help": "gradient stages"})
     normalize: bool = _f(True, "centre and scale the input to a unit bounding-box diagonal while fitting")
+    max_points: int = _f(
+        20000,
+        "fit on at most this many input points, a random subset drawn with the seed (the report still "
+        "measures every point); 0: all points",
+    )
     seed: int = _f(0, "seed of the fit's own random generator (random initialisation)")
     device: str = _f("cpu", "torch device: cpu or cuda")
     dtype: Literal["float32", "float64"] = _f("float64", "floating point type of the fit")
@@ -180,6 +185,8 @@ class FitConfig:
                 "ctrl: a surface closed in v needs at least 2 * degree + 1 control points along v, "
                 f"got {(self.ctrl or (15, 15))[1]}"
             )
+        if int(self.max_points) != self.max_points or self.max_points < 0 or 0 < self.max_points < 4:
+            raise OptionError(f"max_points: expected 0 (all points) or an integer >= 4, got {self.max_points!r}")
         if self.dtype not in ("float32", "float64"):
             raise OptionError(f"dtype: expected float32 or float64, got {self.dtype!r}")
         if self.alternation.rounds < 0:
