@@ -5,7 +5,7 @@ TORCH_SPEC ?= torch==2.13.0
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 
-.PHONY: demo test bench install install-dev clean
+.PHONY: demo test fuzz bench install install-dev clean
 
 $(VENV)/.installed: pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,10 @@ demo: $(VENV)/.installed
 
 test: $(VENV)/.installed
 	$(PY) -m pytest -q
+
+# Property tests with random seeds and 100x the examples (nightly-style; not part of CI).
+fuzz: $(VENV)/.installed
+	NURBSKIT_HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q -p no:cacheprovider
 
 bench: $(VENV)/.installed
 	$(PY) benchmarks/run_all.py

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 from geomdl import BSpline
+from _property import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -22,7 +23,7 @@ from nurbskit.core import NURBSCurve, NURBSSurface, NURBSVolume, basis_functions
 from nurbskit.core.ops import elevate_degree, insert_knot, refine_knots
 
 TOL = 1e-10
-SETTINGS = settings(max_examples=20, deadline=None)
+SETTINGS = settings(max_examples=examples(20), deadline=None)
 
 
 # ---- strategies --------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _property import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -115,7 +116,7 @@ def test_text_round_trip_is_exact(tmp_path, ext):
     np.testing.assert_array_equal(back.points, pts)  # 17 significant digits: float64 exactly
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(arrays(np.float64, st.tuples(st.integers(1, 30), st.just(3)),
               elements=st.floats(allow_nan=False, allow_infinity=False, width=64)))
 def test_xyz_round_trip_property(tmp_path_factory, pts):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from _property import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -93,7 +94,7 @@ def test_cuda_matches_cpu():
     torch.testing.assert_close(sq_c.cpu(), sq)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     n=st.integers(1, 12),
     m=st.integers(1, 12),
