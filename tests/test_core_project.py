@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 import torch
 
+from _assert import assert_close
+
 from nurbskit import NURBSCurve, NURBSSurface, NURBSVolume, NurbskitError
 from nurbskit.core.project import nearest_grid_params, project_points, project_points_curve
 
@@ -325,14 +327,14 @@ def test_errors_name_the_problem():
 
 
 def test_nearest_sample_kdtree_and_cdist_agree():
-    # the KD-tree serves CPU tensors, chunked cdist the accelerators: same answers
-    from nurbskit.core.project import _nearest
+    # the KD-tree serves CPU tensors, tiled exact distances the accelerators: same answers
+    from nurbskit.core import neighbors
 
     g = torch.Generator().manual_seed(14)
     samples = torch.rand(500, 3, dtype=F64, generator=g)
     points = torch.rand(300, 3, dtype=F64, generator=g)
-    by_tree = _nearest(samples, points, chunk=64, count=3, tree=True)
-    by_cdist = _nearest(samples, points, chunk=64, count=3, tree=False)
+    by_tree = neighbors.k_nearest(points, samples, 3)
+    by_cdist = neighbors._index_cdist(points, samples, chunk_bytes=64 * 500 * 8, count=3)
     assert torch.equal(by_tree, by_cdist)
     assert torch.equal(by_tree[:, 0], torch.cdist(points, samples).argmin(dim=1))
 
@@ -348,3 +350,64 @@ def test_zero_distance_has_finite_gradients():
     assert distance.max() < 1e-14
     distance.sum().backward()
     assert torch.isfinite(cp.grad).all() and torch.isfinite(p.grad).all()
+
+
+# ---- periodic directions ------------------------------------------------------------------
+def closed_cylinder(radius: float = RADIUS, z0: float = Z0, z1: float = Z1) -> NURBSSurface:
+    """An exact closed cylinder: v is a rational *periodic* circle (degree 2, double knots,
+    periodic spacing, the last two control columns repeating the first two), u is z.
+
+    The circle's polygon alternates square midpoints (weight 1) and corners (weight
+    1/sqrt(2)), so every span is an exact rational quarter circle; the seam ``v = 0 = 1``
+    is the point ``(radius, 0)``.
+    """
+    R = radius
+    ring = [(R, 0), (R, R), (0, R), (-R, R), (-R, 0), (-R, -R), (0, -R), (R, -R)]
+    ring = ring + ring[:2]
+    w = torch.tensor([1.0, S2] * 5, dtype=F64)
+    cp = torch.tensor([[[x, y, z] for x, y in ring] for z in (z0, z1)], dtype=F64)  # (2, 10, 3)
+    kv_v = torch.tensor([-0.25, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1.25, 1.25], dtype=F64)
+    kv_u = torch.tensor([0.0, 0.0, 1.0, 1.0], dtype=F64)
+    return NURBSSurface(cp, degrees=(1, 2), knot_vectors=[kv_u, kv_v], weights=w[None, :].expand(2, 10).clone())
+
+
+def _seam_points():
+    """1,701 points around the seam: 81 angles in [-0.3, 0.3] rad x 21 radii, inside the z range."""
+    theta = torch.linspace(-0.3, 0.3, 81, dtype=F64)
+    rho = torch.linspace(0.3, 3.0, 21, dtype=F64) * RADIUS
+    t, r = torch.meshgrid(theta, rho, indexing="ij")
+    z = Z0 + (Z1 - Z0) * (0.5 + 0.4 * torch.sin(7 * t + 3 * r))
+    return torch.stack([r * torch.cos(t), r * torch.sin(t), z], -1).reshape(-1, 3), (r - RADIUS).abs().reshape(-1)
+
+
+def test_closed_cylinder_is_exact_and_periodic():
+    s = closed_cylinder()
+    v = torch.linspace(0, 1, 101, dtype=F64)
+    pts = s.evaluate(torch.stack([torch.full_like(v, 0.3), v], -1))
+    assert_close(pts[:, :2].norm(dim=-1), torch.full_like(v, RADIUS), atol=1e-14)
+    from nurbskit.core.project import periodic_directions
+
+    assert periodic_directions(s) == (False, True)
+    assert periodic_directions(cylinder_quarter()) == (False, False)
+
+
+def test_projection_across_a_periodic_seam_is_exact():
+    # Points on both sides of the seam of an exact closed cylinder: the distance is
+    # |rho - R| in closed form. Without periodic directions, Newton stops at the domain
+    # edge v = 0 or v = 1 and returns the seam point instead of the foot point (before the
+    # fix 801 of these 1,701 points came back up to 8.8e-2 off).
+    s = closed_cylinder()
+    p, truth = _seam_points()
+    res = project_points(s, p)
+    assert_close(res.distance, truth, atol=1e-12)
+    # the foot point is the radial one: same angle, same z
+    foot = res.closest
+    assert_close(foot[:, 2], p[:, 2], atol=1e-12)
+    assert_close(torch.atan2(foot[:, 1], foot[:, 0]), torch.atan2(p[:, 1], p[:, 0]), atol=1e-12)
+    # the parameters stay in the knot domain, and saying it explicitly gives the same answer
+    assert bool((res.params[:, 1] >= 0).all() and (res.params[:, 1] <= 1).all())
+    said = project_points(s, p, periodic=(False, True))
+    assert torch.equal(said.params, res.params)
+    # float32: the same points to float32 rounding
+    r32 = project_points(s.to(torch.float32), p.float())
+    assert_close(r32.distance, truth.float(), atol=2e-6)

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nurbskit.errors import NurbskitError
-from nurbskit.geometry import neighbors
-from nurbskit.geometry.neighbors import nearest_neighbors, nearest_neighbors_naive
+from nurbskit.core import neighbors
+from nurbskit.core.neighbors import nearest_neighbors, nearest_neighbors_naive
 
 
 def _clouds(n, m, d, seed, dtype=torch.float64):

@@ -15,7 +15,7 @@ settings (kornia's layout). Definitions follow the thesis this project grew from
   on the output grid, or on the control grid (the thesis's "variant").
 * Point-to-surface: true distance by projection (:func:`nurbskit.core.project.project_points`).
 
-Nearest neighbours are found without gradient (:mod:`nurbskit.geometry.neighbors`)
+Nearest neighbours are found without gradient (:mod:`nurbskit.core.neighbors`)
 and the distances recomputed by gathering, so gradients are exact wherever each
 nearest neighbour is unique, and memory stays ``O(N + M)`` on CPU.
 """
@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from .errors import NurbskitError
-from .geometry.neighbors import nearest_neighbors
+from .core.neighbors import nearest_neighbors
 
 Tensor = torch.Tensor
 

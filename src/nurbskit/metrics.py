@@ -23,7 +23,7 @@ import torch
 
 from . import losses
 from .errors import NurbskitError
-from .geometry.neighbors import nearest_neighbors
+from .core.neighbors import nearest_neighbors
 
 Tensor = torch.Tensor
 

@@ -34,16 +34,18 @@ ends themselves (a foot point held on the edge ``u = knots[p]`` does not follow 
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple, Sequence
 
 import torch
 
 from ..errors import NurbskitError
 from . import tensor as _tp
+from .neighbors import k_nearest
 
 Tensor = torch.Tensor
 
-__all__ = ["Projection", "project_points", "project_points_curve", "nearest_grid_params"]
+__all__ = ["Projection", "project_points", "project_points_curve", "nearest_grid_params", "periodic_directions"]
 
 
 class Projection(NamedTuple):
@@ -132,7 +134,11 @@ def _positive_definite(A: Tensor, free: Tensor, scale: Tensor) -> Tensor:
 
 
 def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
-    """One projected (active-set) Newton direction ``(M, k)`` for ``f / 2`` at ``t``."""
+    """One projected (active-set) Newton direction ``(M, k)`` for ``f / 2`` at ``t``.
+
+    Branch-free (no host read): both the direction with the first active set and the one
+    with the blocked parameters held as well are computed, and ``torch.where`` picks.
+    """
     k = t.shape[-1]
     JJ = J @ J.transpose(1, 2)
     trace = JJ.diagonal(dim1=1, dim2=2).sum(-1)
@@ -153,41 +159,68 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
     # A Newton step that points out of the domain from an edge is blocked by the clamp and
     # may then not descend: hold that parameter as well and solve for the other one alone.
     blocked = free & ((at_lo & (d < 0)) | (at_hi & (d > 0)))
-    if bool(blocked.any()):
-        free = free & ~blocked
-        d = torch.where(blocked.any(-1, keepdim=True), direction(free), d)
-    return d
+    return torch.where(blocked.any(-1, keepdim=True), direction(free & ~blocked), d)
+
+
+class _Domain(NamedTuple):
+    """The parameter box as tensors (no host read): ``lo``, ``hi`` ``(k,)``; a periodic
+    direction has ``lo = -inf``, ``hi = inf`` for the clamp and wraps into
+    ``[start, start + period)`` instead."""
+
+    lo: Tensor
+    hi: Tensor
+    start: Tensor
+    period: Tensor
+    periodic: Tensor  # (k,) bool
+
+    def fold(self, t: Tensor) -> Tensor:
+        t = torch.maximum(torch.minimum(t, self.hi), self.lo)
+        wrapped = self.start + torch.remainder(t - self.start, self.period)
+        return torch.where(self.periodic, wrapped, t)
+
+
+def _domain(spline, periodic: Sequence[bool]) -> _Domain:
+    kvs = [kv.detach() for kv in spline.knot_vectors]
+    a = torch.stack([kv[p] for kv, p in zip(kvs, spline.degrees)])
+    b = torch.stack([kv[n] for kv, n in zip(kvs, spline.sizes)])
+    per = torch.tensor(list(periodic), dtype=torch.bool, device=a.device)
+    inf = torch.full_like(a, float("inf"))
+    return _Domain(torch.where(per, -inf, a), torch.where(per, inf, b), a, b - a, per)
 
 
 @torch.no_grad()
-def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, noise: float) -> Tensor:
+def _newton(
+    spline, Pw: Tensor, t: Tensor, x: Tensor, dom: _Domain, iterations: int, tol_move: Tensor, noise: Tensor,
+    check_every: int,
+) -> Tensor:
     """Refine start parameters ``t (M, k)`` for points ``x (M, dim)`` -> ``(M, k)``.
 
     ``noise`` is the rounding error of a computed point (``eps`` times the size of the
     control net): a step is accepted unless it raises ``f = |r|^2`` by more than the
     rounding of ``f``, about ``4 noise (|r| + noise)``.
 
-    The state of the points still iterating is kept compact (finished points leave it),
-    and updated with ``torch.where``, ``index_select`` and ``index_copy_``: on CPU these
-    are an order of magnitude faster than boolean or advanced indexing.
+    Masked iterations: every point takes part in every iteration, and a point that has
+    converged is frozen by ``torch.where``, so an iteration reads nothing back to the
+    host. Every ``check_every`` iterations (0: never) one value is read: the loop stops
+    once every point has converged, and on the CPU the state is compacted to the points
+    still moving (there a host read costs nothing and the work shrinks).
     """
-    lo = torch.tensor([a for a, _ in spline.domain], dtype=t.dtype, device=t.device)
-    hi = torch.tensor([b for _, b in spline.domain], dtype=t.dtype, device=t.device)
-    t = torch.maximum(torch.minimum(t, hi), lo)
+    t = dom.fold(t)
     out = t.clone()
-    Pw = _tp.homogeneous(spline.control_points, spline.weights).contiguous()
     _, f, g, H, J = _local_model(spline, Pw, t, x)
     scale = torch.ones_like(f)
-    index = torch.arange(t.shape[0], device=t.device)
+    done = torch.zeros_like(f, dtype=torch.bool)
+    index = None  # rows of `out` still in the state (None: all, in order)
     min_scale = 2.0 ** -16
-    for _ in range(iterations):
-        if index.numel() == 0:
-            break
-        d = _step(g, H, J, t, lo, hi) * scale[:, None]
-        cand = torch.maximum(torch.minimum(t + d, hi), lo)
+    compact = t.device.type == "cpu"
+    for it in range(iterations):
+        d = _step(g, H, J, t, dom.lo, dom.hi) * scale[:, None]
+        cand = dom.fold(t + d)
         _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x)
-        accept = fc <= f + 4 * noise * (f.sqrt() + noise)
-        moved = ((cand - t).unsqueeze(-1) * J).sum(1).norm(dim=-1)
+        accept = (fc <= f + 4 * noise * (f.sqrt() + noise)) & ~done
+        # the step actually taken (a periodic wrap does not count as movement)
+        delta = torch.where(dom.periodic, torch.maximum(torch.minimum(d, dom.hi), dom.lo), cand - t)
+        moved = (delta.unsqueeze(-1) * J).sum(1).norm(dim=-1)
         a1, a2 = accept[:, None], accept[:, None, None]
         t, f, g = torch.where(a1, cand, t), torch.where(accept, fc, f), torch.where(a1, gc, g)
         H, J = torch.where(a2, Hc, H), torch.where(a2, Jc, J)
@@ -195,43 +228,27 @@ def _newton(spline, t: Tensor, x: Tensor, iterations: int, tol_move: float, nois
         # Converged: the last step moved the foot point by less than tol (Newton is
         # quadratic, so the accepted point is then accurate to about tol^2 / curvature
         # radius); stuck: the step was halved until it no longer matters.
-        done = (moved <= tol_move) | (~accept & (scale < min_scale))
-        if bool(done.any()):
-            fin = torch.nonzero(done).reshape(-1)
-            out.index_copy_(0, index.index_select(0, fin), t.index_select(0, fin))
-            keep = torch.nonzero(~done).reshape(-1)
-            index, t, f, g, H, J, scale, x = (z.index_select(0, keep) for z in (index, t, f, g, H, J, scale, x))
-    out.index_copy_(0, index, t)  # points still moving after the last iteration
+        done = done | (moved <= tol_move) | (~accept & (scale < min_scale))
+        if check_every and (it + 1) % check_every == 0 and it + 1 < iterations:
+            remaining = int((~done).sum())  # the one host read of this check
+            if remaining == 0:
+                break
+            if compact and remaining <= done.shape[0] // 2:
+                rows = torch.arange(done.shape[0], device=t.device) if index is None else index
+                fin = torch.nonzero(done).reshape(-1)
+                out.index_copy_(0, rows.index_select(0, fin), t.index_select(0, fin))
+                keep = torch.nonzero(~done).reshape(-1)
+                index = rows.index_select(0, keep)
+                t, f, g, H, J, scale, x, done = (z.index_select(0, keep) for z in (t, f, g, H, J, scale, x, done))
+    if index is None:
+        return t
+    out.index_copy_(0, index, t)
     return out
 
 
 # ----------------------------------------------------------------------------------------
 # start points
 # ----------------------------------------------------------------------------------------
-def _nearest(samples: Tensor, points: Tensor, chunk: int, count: int = 1, tree: bool | None = None) -> Tensor:
-    """Indices ``(N, count)`` of the ``count`` nearest rows of ``samples (G, dim)`` to ``points (N, dim)``.
-
-    ``tree`` (default: on CPU) uses scipy's KD-tree, otherwise a chunked ``torch.cdist``.
-    """
-    count = min(count, samples.shape[0])
-    if tree is None:
-        tree = samples.device.type == "cpu"
-    if tree:
-        from scipy.spatial import cKDTree
-
-        kd = cKDTree(samples.double().numpy())
-        _, idx = kd.query(points.double().numpy(), k=count, workers=max(1, torch.get_num_threads()))
-        return torch.as_tensor(idx, dtype=torch.int64).reshape(points.shape[0], count)
-    # On accelerators a chunked brute force is one GEMM per chunk; the chunk keeps the
-    # (rows, G) distance block near 2^24 entries.
-    rows = max(1, min(chunk, (1 << 24) // max(1, samples.shape[0])))
-    out = [
-        torch.cdist(points[i : i + rows], samples).topk(count, dim=-1, largest=False).indices
-        for i in range(0, points.shape[0], rows)
-    ]
-    return torch.cat(out) if out else torch.zeros(0, count, dtype=torch.int64, device=points.device)
-
-
 def _as_eval(t: Tensor, k: int) -> Tensor:
     """``(M, k)`` -> what ``evaluate`` takes: ``(M,)`` for curves, ``(M, 2)`` for surfaces."""
     return t[:, 0] if k == 1 else t
@@ -251,11 +268,13 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> t
     """Start parameters for Newton: ``rows (E,)`` (indices into the points) and ``t0 (E, k)``.
 
     Each point starts from its ``starts`` nearest grid samples (the first ``N`` entries are
-    each point's nearest one, in order). Samples where the map degenerates (the pole of
-    a sphere patch, ``C_u = 0``) are saddles for Newton: the gradient along the collapsed
-    direction vanishes there, so Newton cannot leave them towards a boundary minimum
-    nearby. A point whose nearest sample is degenerate therefore also starts from its
-    nearest regular sample (the degenerate point itself may be the true foot point).
+    each point's nearest one, in order), found by :mod:`nurbskit.core.neighbors`. Samples
+    where the map degenerates (the pole of a sphere patch, ``C_u = 0``) are saddles for
+    Newton: the gradient along the collapsed direction vanishes there, so Newton cannot
+    leave them towards a boundary minimum nearby. When the grid has such samples, every
+    point therefore also starts from its nearest regular sample (the degenerate point
+    itself may be the true foot point); deciding this per grid, not per point, keeps the
+    number of starts independent of the data (no host read per point).
     """
     axes = spline.grid_axes(_resolution(spline, grid))
     k = spline.para_dim
@@ -271,15 +290,15 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> t
     regular = gram > 1e-12 * gram.max()
     x = points.detach().to(samples.dtype)
     n = x.shape[0]
-    idx = _nearest(samples, x, chunk, starts).to(table.device)  # (N, count)
+    idx = k_nearest(x, samples, starts).to(table.device)  # (N, count)
     own = torch.arange(n, device=table.device)
-    rows = [own] + [own] * (idx.shape[1] - 1)
+    rows = [own] * idx.shape[1]
     t0 = [table.index_select(0, idx[:, j]) for j in range(idx.shape[1])]
-    degenerate = torch.nonzero(~regular[idx[:, 0]]).reshape(-1)
-    if degenerate.numel() and bool(regular.any()):
-        sub = _nearest(samples[regular], x[degenerate], chunk)[:, 0].to(table.device)
-        rows.append(degenerate)
-        t0.append(table[regular][sub])
+    if not bool(regular.all()) and bool(regular.any()):
+        keep = torch.nonzero(regular).reshape(-1)
+        sub = k_nearest(x, samples.index_select(0, keep), 1)[:, 0]
+        rows.append(own)
+        t0.append(table.index_select(0, keep.index_select(0, sub)))
     return torch.cat(rows), torch.cat(t0)
 
 
@@ -300,9 +319,63 @@ def nearest_grid_params(spline, points: Tensor, grid: int | Sequence[int] | None
         return _grid_starts(spline.detach(), points, grid, chunk)[1][: points.shape[0]]
 
 
+def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
+    """Which parametric directions are periodic: a periodic knot spacing and the last
+    ``p`` control columns (and weights) repeating the first ``p``.
+
+    Such a direction is closed with continuity ``C^{p-1}`` at the seam (the fit's closed
+    v, :func:`nurbskit.fit.params.periodic_knots`): the curve leaves the domain's end and
+    comes back in at its start. Equality is up to ``tol`` relative to the size of the
+    control net (default ``64 eps``). Reads a few values back to the host: pass
+    ``periodic=`` to :func:`project_points` inside loops.
+
+    Example:
+        >>> import torch
+        >>> from nurbskit import NURBSCurve
+        >>> P = torch.tensor([[1., 0.], [0., 1.], [-1., 0.], [0., -1.], [1., 0.], [0., 1.]], dtype=torch.float64)
+        >>> knots = torch.arange(-2.0, 7.0, dtype=torch.float64) / 4
+        >>> periodic_directions(NURBSCurve(P, degree=2, knot_vector=knots))
+        (True,)
+    """
+    with torch.no_grad():
+        cp, w = spline.control_points.detach(), spline.weights.detach()
+        eps = torch.finfo(cp.dtype).eps
+        flat = cp.reshape(-1, cp.shape[-1])
+        size = float((flat.amax(0) - flat.amin(0)).norm()) or 1.0
+        rel = (64 * eps) if tol is None else float(tol)
+        out = []
+        for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
+            kv = kv.detach()
+            if p < 1 or n <= p:
+                out.append(False)
+                continue
+            gaps = kv[1:] - kv[:-1]  # n + p gaps; period n - p
+            span = float(kv[n] - kv[p]) or 1.0
+            same_gaps = bool(((gaps[: 2 * p] - gaps[n - p : n + p]).abs() <= rel * span).all())
+            same_cp = bool(((cp.narrow(a, 0, p) - cp.narrow(a, n - p, p)).abs() <= rel * size).all())
+            same_w = bool(((w.narrow(a, 0, p) - w.narrow(a, n - p, p)).abs() <= rel * w.abs().amax()).all())
+            out.append(same_gaps and same_cp and same_w)
+        return tuple(out)
+
+
 # ----------------------------------------------------------------------------------------
 # public entry points
 # ----------------------------------------------------------------------------------------
+def _batch_shape(spline) -> tuple[int, ...]:
+    """Leading batch dimensions of a spline's control points ``(*B, n_1..n_k, dim)``."""
+    return tuple(spline.control_points.shape[: spline.control_points.ndim - spline.para_dim - 1])
+
+
+def _element(spline, i: int, batch: tuple[int, ...]):
+    """Element ``i`` (flat index) of a batched spline: knots shared ``(m,)`` or per element ``(*B, m)``."""
+    k = spline.para_dim
+    cp = spline.control_points.reshape(-1, *spline.control_points.shape[len(batch):])[i]
+    w = spline.weights.reshape(-1, *spline.weights.shape[len(batch):])[i]
+    kvs = [kv if kv.ndim == 1 else kv.reshape(-1, kv.shape[-1])[i] for kv in spline.knot_vectors]
+    assert cp.ndim == k + 1
+    return spline._replace(control_points=cp, weights=w, knot_vectors=kvs)
+
+
 def project_points(
     spline,
     points,
@@ -312,14 +385,20 @@ def project_points(
     iterations: int = 32,
     tol: float | None = None,
     chunk: int = 65536,
+    periodic: Sequence[bool] | None = None,
+    params: Tensor | None = None,
+    restart: bool = False,
+    check_every: int = 4,
+    validate: bool = True,
 ) -> Projection:
     """Closest points on a NURBS surface (or curve) to many points, differentiably.
 
     Args:
         spline: a :class:`NURBSSurface` (or :class:`NURBSCurve`; see
-            :func:`project_points_curve`).
+            :func:`project_points_curve`), possibly batched: control points
+            ``(*B, n_u, n_v, dim)`` (see Convention).
         points: ``(..., N, dim)`` with ``dim == spline.dim``; converted to the spline's
-            dtype and device.
+            dtype and device. For a batched spline ``(*B, N, dim)``.
         grid: samples per parametric direction for the start points (int or one per
             direction); default ``max(4 * n, 32)`` for ``n`` control points.
         starts: refine from this many nearest grid samples per point and keep the closest
@@ -331,11 +410,30 @@ def project_points(
             ``tol`` times the diagonal of the control net's bounding box; default
             ``eps ** 0.75`` of the dtype (about 2e-12 in float64, 6e-6 in float32).
         chunk: points refined together; bounds the memory of one iteration.
+        periodic: one bool per parametric direction: a periodic direction (periodic knot
+            spacing, last ``p`` control columns repeating the first ``p``) has no edge;
+            Newton steps across its seam and wraps. Default: detected
+            (:func:`periodic_directions`, a few host reads).
+        params: warm start ``(..., N, 2)`` (``(..., N)`` for curves), e.g. the foot
+            points of a previous, nearby surface: Newton starts there instead of at the
+            grid (no grid is built).
+        restart: with ``params``, also start from the grid and keep the closer result
+            per point (a foot point can jump to another part of the surface).
+        check_every: read one value back every this many iterations to stop once all
+            points have converged; 0 runs all ``iterations`` and reads nothing.
+        validate: check the points for NaN and infinity (one host read); loops that
+            already checked their input pass False.
 
     Returns:
         ``Projection(params, closest, distance)``: ``params (..., N, 2)`` (``(..., N)`` for
         curves) detached, ``closest (..., N, dim)`` and ``distance (..., N)`` with gradients
         (envelope theorem: foot-point parameters held fixed).
+
+    Convention: a batched spline (control points ``(*B, n_u, n_v, dim)``, knots shared
+    ``(m,)`` or per element ``(*B, m)``) takes points ``(*B, N, dim)`` and projects each
+    batch element onto its own surface. The elements are projected one after another
+    (a loop at this boundary, until the core's kernels take a batch); the results are
+    those of projecting each element alone.
 
     Example:
         >>> import torch
@@ -368,34 +466,81 @@ def project_points(
         raise NurbskitError(f"project_points: starts must be >= 1, got {starts}")
     if chunk < 1:
         raise NurbskitError(f"project_points: chunk must be >= 1, got {chunk}")
+    if periodic is not None:
+        periodic = tuple(bool(p) for p in periodic)
+        if len(periodic) != k:
+            raise NurbskitError(f"project_points: periodic needs {k} value(s), one per parametric direction, got {periodic!r}")
+    options = dict(grid=grid, starts=starts, iterations=iterations, tol=tol, chunk=chunk, restart=restart,
+                   check_every=check_every, validate=validate)
+
+    batch_shape = _batch_shape(spline)
+    if batch_shape:
+        # Batched spline: one element after another (marked: a loop at the API boundary).
+        if tuple(x.shape[: len(batch_shape)]) != batch_shape or x.ndim != len(batch_shape) + 2:
+            raise NurbskitError(
+                f"project_points: a spline batch {batch_shape} takes points {batch_shape + ('N', spline.dim)}, "
+                f"got {tuple(x.shape)}"
+            )
+        count = math.prod(batch_shape)
+        xs = x.reshape(count, *x.shape[len(batch_shape):])
+        ps = None if params is None else params.reshape(count, *params.shape[len(batch_shape):])
+        parts = [
+            _project_one(_element(spline, i, batch_shape), xs[i], periodic, None if ps is None else ps[i], **options)
+            for i in range(count)
+        ]
+        return Projection(*(torch.stack(z).reshape(batch_shape + z[0].shape) for z in zip(*parts)))
+    return _project_one(spline, x, periodic, params, **options)
+
+
+def _project_one(spline, x: Tensor, periodic, warm, *, grid, starts, iterations, tol, chunk, restart, check_every, validate):
+    """:func:`project_points` for one (unbatched) spline; points ``(..., N, dim)``."""
+    k = spline.para_dim
     batch = x.shape[:-1]
     flat = x.reshape(-1, spline.dim)
+    n = flat.shape[0]
     with torch.no_grad():
         xd = flat.detach()
-        if not torch.isfinite(xd).all():
+        if validate and not torch.isfinite(xd).all():
             raise NurbskitError("project_points: points contain NaN or infinite values")
         fixed = spline.detach()
+        if periodic is None:
+            periodic = periodic_directions(fixed)
+        dom = _domain(fixed, periodic)
         eps = torch.finfo(spline.dtype).eps
         cp = fixed.control_points.reshape(-1, spline.dim)
-        size = float((cp.amax(0) - cp.amin(0)).norm()) or 1.0
+        size = (cp.amax(0) - cp.amin(0)).norm()
+        size = torch.where(size > 0, size, torch.ones_like(size))  # a tensor: no host read
         tol_move = (eps ** 0.75 if tol is None else float(tol)) * size
         params = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
-        if flat.shape[0]:
-            rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
+        if n:
+            if warm is not None:
+                w = torch.as_tensor(warm).to(dtype=spline.dtype, device=spline.device).detach()
+                w = w.reshape(n, k)
+                rows, starts_t = torch.arange(n, device=w.device), w
+                if restart:
+                    r2, s2 = _grid_starts(fixed, xd, grid, chunk, starts)
+                    rows, starts_t = torch.cat([rows, r2]), torch.cat([starts_t, s2])
+            else:
+                rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
             targets = xd.index_select(0, rows)
-            found = torch.empty_like(starts_t)
-            for i in range(0, starts_t.shape[0], chunk):
-                found[i : i + chunk] = _newton(fixed, starts_t[i : i + chunk], targets[i : i + chunk], iterations, tol_move, eps * size)
-            params = found[: flat.shape[0]].clone()
-            if rows.numel() > flat.shape[0]:
-                # several starts for some points: keep the closest result
+            Pw = _tp.homogeneous(fixed.control_points, fixed.weights).contiguous()
+            pieces = [
+                _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk], dom, iterations, tol_move,
+                        eps * size, check_every)
+                for i in range(0, starts_t.shape[0], chunk)
+            ]
+            found = torch.cat(pieces)
+            params = found[:n]
+            if rows.numel() > n:
+                # several starts for some points: keep the closest result, without a host read
                 f = (fixed.evaluate(_as_eval(found, k)) - targets).square().sum(-1)
-                best = torch.full((flat.shape[0],), float("inf"), dtype=f.dtype, device=f.device)
+                best = torch.full((n,), float("inf"), dtype=f.dtype, device=f.device)
                 best = best.scatter_reduce(0, rows, f, reduce="amin")
-                winner = torch.nonzero(f <= best[rows]).reshape(-1)
+                order = torch.arange(rows.numel(), device=rows.device)
                 # ties: the earliest start wins, deterministically on every device
-                choice = torch.full((flat.shape[0],), rows.numel(), dtype=torch.int64, device=rows.device)
-                choice = choice.scatter_reduce(0, rows[winner], winner, reduce="amin")
+                candidate = torch.where(f <= best.index_select(0, rows), order, torch.full_like(order, rows.numel()))
+                choice = torch.full((n,), rows.numel(), dtype=torch.int64, device=rows.device)
+                choice = choice.scatter_reduce(0, rows, candidate, reduce="amin")
                 params = found.index_select(0, choice)
     params = _as_eval(params, k)
     closest = spline.evaluate(params)
@@ -416,12 +561,14 @@ def project_points_curve(
     iterations: int = 32,
     tol: float | None = None,
     chunk: int = 65536,
+    **options,
 ) -> Projection:
     """Closest points on a NURBS curve: :func:`project_points` in one parameter.
 
     Shapes: ``points (..., N, dim)`` -> ``params (..., N)``, ``closest (..., N, dim)``,
     ``distance (..., N)``. The end points are the edges of the domain: a point beyond an
-    end projects onto it.
+    end projects onto it (unless the curve is periodic). ``options`` are those of
+    :func:`project_points` (``periodic``, ``params``, ``restart``, ``check_every``, ``validate``).
 
     Example:
         >>> import torch
@@ -433,4 +580,4 @@ def project_points_curve(
     """
     if getattr(curve, "para_dim", None) != 1:
         raise NurbskitError(f"project_points_curve takes a NURBSCurve, got {type(curve).__name__}")
-    return project_points(curve, points, grid=grid, starts=starts, iterations=iterations, tol=tol, chunk=chunk)
+    return project_points(curve, points, grid=grid, starts=starts, iterations=iterations, tol=tol, chunk=chunk, **options)

@@ -129,7 +129,7 @@ def looks_closed(points: Tensor, neighbours: int = 8, threshold: float = 0.25) -
     than ``threshold`` of the projected neighbours are more than 2.5 times (plus 1 %
     of the bounding-box diagonal) farther away in 3D than in the projection.
     """
-    from scipy.spatial import cKDTree
+    from ..core.neighbors import kdtree
 
     x = points.detach().cpu().double().numpy()
     if len(x) < neighbours + 2:
@@ -138,7 +138,7 @@ def looks_closed(points: Tensor, neighbours: int = 8, threshold: float = 0.25) -
     _, _, vt = np.linalg.svd(x - center, full_matrices=False)
     xy = (x - center) @ vt[:2].T
     diag = float(np.linalg.norm(x.max(0) - x.min(0)))
-    d2, idx = cKDTree(xy).query(xy, k=neighbours + 1)
+    d2, idx = kdtree(xy).query(xy, k=neighbours + 1)
     d3 = np.linalg.norm(x[idx[:, 1:]] - x[:, None, :], axis=-1)
     far = d3 > 2.5 * d2[:, 1:] + 0.01 * diag
     return bool(far.mean() > threshold)

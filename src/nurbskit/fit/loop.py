@@ -37,7 +37,7 @@ import torch
 
 from .. import losses as L
 from ..errors import OptionError
-from ..geometry.neighbors import nearest_neighbors
+from ..core.neighbors import NeighborIndex, nearest_neighbors
 from .config import StageConfig
 from ..core.knots import knots_to_logits
 from .lstsq import equidistributed_knots, foot_points, solve_control_points

@@ -1,7 +1,7 @@
-"""Point sets: sampling meshes and NURBS, neighbours, normalisation.
+"""Point sets: sampling meshes and NURBS, normalisation.
 
-Submodules load on first use (``nurbskit.geometry.neighbors`` belongs to the fitting
-side and pulls in more than sampling needs).
+Submodules load on first use. Nearest neighbours live in :mod:`nurbskit.core.neighbors`
+(one kernel for the core's projection, the losses and the fit).
 """
 
 import importlib

@@ -112,7 +112,7 @@ def greedy_independent_set(num: int, pairs: np.ndarray, rank: np.ndarray) -> np.
 
 
 def _poisson(v, f, area, n: int, rng, oversample: int):
-    from scipy.spatial import cKDTree
+    from ..core.neighbors import kdtree
 
     m = max(int(oversample) * n, n + 16)
     face, bary = _uniform(f, area, m, rng)
@@ -123,7 +123,7 @@ def _poisson(v, f, area, n: int, rng, oversample: int):
     # the candidate pairs computed once.
     r0 = np.sqrt(0.5 * total / n)
     # an unbalanced tree without node compaction builds about twice as fast and queries as fast
-    tree = cKDTree(cand, balanced_tree=False, compact_nodes=False)
+    tree = kdtree(cand, balanced_tree=False, compact_nodes=False)
     r_max = 1.2 * r0
     pairs = tree.query_pairs(r_max, output_type="ndarray")
     a, b = pairs[:, 0], pairs[:, 1]
@@ -165,7 +165,7 @@ def _poisson(v, f, area, n: int, rng, oversample: int):
     idx = np.flatnonzero(keep)
     if count > n:
         # drop the surplus closest-first: removing points never brings the others closer
-        d, _ = cKDTree(cand[idx]).query(cand[idx], k=2)
+        d, _ = kdtree(cand[idx]).query(cand[idx], k=2)
         idx = idx[np.sort(np.argsort(-d[:, 1], kind="stable")[:n])]
     return face[idx], bary[idx], lo
 
@@ -245,8 +245,8 @@ def sample_parametric(obj, resolution: int | Sequence[int]):
 
 def nearest_neighbor_distances(points) -> np.ndarray:
     """Distance from every point to its nearest other point: ``(N, 3)`` -> ``(N,)`` (KD-tree)."""
-    from scipy.spatial import cKDTree
+    from ..core.neighbors import kdtree
 
     p = _to_numpy(points, "points").astype(np.float64)
-    d, _ = cKDTree(p).query(p, k=2)
+    d, _ = kdtree(p).query(p, k=2)
     return d[:, 1]
