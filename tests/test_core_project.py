@@ -94,7 +94,7 @@ def smooth_height_field(seed: int = 0, n=(6, 5), degrees=(3, 2)) -> NURBSSurface
 def test_sphere_octant_is_exact():
     s = sphere_octant()
     uv = torch.rand(200, 2, dtype=F64, generator=torch.Generator().manual_seed(0))
-    assert torch.allclose(s.evaluate(uv).norm(dim=-1), torch.ones(200, dtype=F64), atol=1e-14)
+    assert_close(s.evaluate(uv).norm(dim=-1), torch.ones(200, dtype=F64), atol=1e-14)
 
 
 def test_sphere_points_above_and_below_the_patch():
@@ -104,8 +104,8 @@ def test_sphere_points_above_and_below_the_patch():
     rho = 0.2 + 2.8 * torch.rand(1500, dtype=F64, generator=g)
     params, closest, distance = project_points(sphere_octant(), d * rho[:, None])
     assert params.shape == (1500, 2) and closest.shape == (1500, 3) and distance.shape == (1500,)
-    assert torch.allclose(distance, (rho - 1).abs(), rtol=0, atol=1e-9)
-    assert torch.allclose(closest, d, rtol=0, atol=1e-9)
+    assert_close(distance, (rho - 1).abs(), atol=1e-9)
+    assert_close(closest, d, atol=1e-9)
     assert (params >= 0).all() and (params <= 1).all()
 
 
@@ -116,8 +116,8 @@ def test_sphere_any_point_of_space_edges_corners_and_pole():
     p = 1.5 * torch.randn(3000, 3, dtype=F64, generator=g)
     _, closest, distance = project_points(sphere_octant(), p)
     q = sphere_closest(p)
-    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
-    assert torch.allclose(closest, q, rtol=0, atol=1e-7)  # foot point: first order in the distance error
+    assert_close(distance, (p - q).norm(dim=-1), atol=1e-9)
+    assert_close(closest, q, atol=1e-7)  # foot point: first order in the distance error
 
 
 def test_sphere_boundary_curves_closed_form():
@@ -127,15 +127,15 @@ def test_sphere_boundary_curves_closed_form():
     params, closest, distance = project_points(sphere_octant(), p)
     q = p * torch.tensor([1.0, 0.0, 1.0], dtype=F64)
     q = q / q.norm(dim=-1, keepdim=True)
-    assert torch.allclose(params[:, 0], torch.zeros(400, dtype=F64), atol=0)  # held exactly on the edge
-    assert torch.allclose(closest, q, atol=1e-9)
-    assert torch.allclose(distance, (p - q).norm(dim=-1), atol=1e-9)
+    assert_close(params[:, 0], torch.zeros(400, dtype=F64), atol=0)  # held exactly on the edge
+    assert_close(closest, q, atol=1e-9)
+    assert_close(distance, (p - q).norm(dim=-1), atol=1e-9)
     # z < 0, x, y > 0: the foot point is on the equator v = 0.
     p = p * torch.tensor([1.0, -1.0, -1.0], dtype=F64)
     params, closest, _ = project_points(sphere_octant(), p)
     q = p * torch.tensor([1.0, 1.0, 0.0], dtype=F64)
     assert torch.equal(params[:, 1], torch.zeros(400, dtype=F64))
-    assert torch.allclose(closest, q / q.norm(dim=-1, keepdim=True), atol=1e-9)
+    assert_close(closest, q / q.norm(dim=-1, keepdim=True), atol=1e-9)
 
 
 def test_cylinder_radial_distance_and_outside_points():
@@ -146,17 +146,17 @@ def test_cylinder_radial_distance_and_outside_points():
     z = Z0 + (Z1 - Z0) * torch.rand(n, dtype=F64, generator=g)
     p = torch.stack([rho * theta.cos(), rho * theta.sin(), z], dim=-1)
     params, closest, distance = project_points(cylinder_quarter(), p)
-    assert torch.allclose(distance, (rho - RADIUS).abs(), rtol=0, atol=1e-9)
-    assert torch.allclose(closest, torch.stack([RADIUS * theta.cos(), RADIUS * theta.sin(), z], -1), atol=1e-9)
+    assert_close(distance, (rho - RADIUS).abs(), atol=1e-9)
+    assert_close(closest, torch.stack([RADIUS * theta.cos(), RADIUS * theta.sin(), z], -1), atol=1e-9)
     # v is linear in z on this patch: z = Z0 + (Z1 - Z0) * (v - 0) / 4
-    assert torch.allclose(params[:, 1], (z - Z0) / (Z1 - Z0) * V_DOM[1], atol=1e-9)
+    assert_close(params[:, 1], (z - Z0) / (Z1 - Z0) * V_DOM[1], atol=1e-9)
     assert ((params[:, 0] >= U_DOM[0]) & (params[:, 0] <= U_DOM[1])).all()
     # anywhere in space: beyond the top, bottom and side edges, and the corners
     p = torch.randn(3000, 3, dtype=F64, generator=g) * torch.tensor([3.0, 3.0, 3.0], dtype=F64) + torch.tensor([0, 0, 2.0], dtype=F64)
     params, closest, distance = project_points(cylinder_quarter(), p)
     q = cylinder_closest(p)
-    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
-    assert torch.allclose(closest, q, rtol=0, atol=1e-7)
+    assert_close(distance, (p - q).norm(dim=-1), atol=1e-9)
+    assert_close(closest, q, atol=1e-7)
     assert ((params >= torch.tensor([U_DOM[0], V_DOM[0]], dtype=F64)) & (params <= torch.tensor([U_DOM[1], V_DOM[1]], dtype=F64))).all()
 
 
@@ -168,10 +168,10 @@ def test_points_on_the_surface_recover_their_parameters():
     uv = torch.cat([edges, uv])
     params, closest, distance = project_points(s, s.evaluate(uv))
     assert distance.max() < 1e-12
-    assert torch.allclose(params, uv, rtol=0, atol=1e-9)
+    assert_close(params, uv, atol=1e-9)
     on_edge = (edges == edges.amin(0)) | (edges == edges.amax(0))
     # the gradient vanishes on the surface, so an edge parameter may move by rounding only
-    assert torch.allclose(params[:8][on_edge], edges[on_edge], rtol=0, atol=1e-13)
+    assert_close(params[:8][on_edge], edges[on_edge], atol=1e-13)
 
 
 def test_never_worse_than_dense_sampling():
@@ -224,11 +224,11 @@ def test_envelope_gradient_matches_finite_differences():
     # a spread of entries (every third coordinate, every other weight) keeps the test short
     cp_entries, w_entries = list(range(0, 48, 3)), list(range(0, 16, 2))
     fd_cp = _fd_check(lambda c: NURBSSurface(c, s0.degrees, s0.knot_vectors, s0.weights), cp, p.detach(), entries=cp_entries)
-    assert torch.allclose(cp.grad.reshape(-1)[cp_entries], fd_cp, rtol=1e-5, atol=1e-7)
+    assert_close(cp.grad.reshape(-1)[cp_entries], fd_cp, rtol=1e-5, atol=1e-7)
     fd_w = _fd_check(lambda ww: NURBSSurface(s0.control_points, s0.degrees, s0.knot_vectors, ww), w, p.detach(), entries=w_entries)
-    assert torch.allclose(w.grad.reshape(-1)[w_entries], fd_w, rtol=1e-5, atol=1e-7)
+    assert_close(w.grad.reshape(-1)[w_entries], fd_w, rtol=1e-5, atol=1e-7)
     # gradient w.r.t. the points: d/dp |p - c|^2 = 2 (p - c) with the foot point fixed
-    assert torch.allclose(p.grad, 2 * (p.detach() - closest.detach()), atol=1e-12)
+    assert_close(p.grad, 2 * (p.detach() - closest.detach()), atol=1e-12)
 
 
 def test_envelope_gradient_in_an_interior_knot():
@@ -240,7 +240,7 @@ def test_envelope_gradient_in_an_interior_knot():
     project_points(s, p).distance.square().sum().backward()
     interior = [3, 4]  # [0, 0, 0, k3, k4, 2, 2, 2]
     fd = _fd_check(lambda k: NURBSSurface(s0.control_points, s0.degrees, [k, s0.knot_vectors[1]], s0.weights), kv, p, entries=interior)
-    assert torch.allclose(kv.grad[interior], fd, rtol=1e-5, atol=1e-7)
+    assert_close(kv.grad[interior], fd, rtol=1e-5, atol=1e-7)
 
 
 def test_gradcheck_distance_in_points_and_control_points():
@@ -265,8 +265,8 @@ def test_curve_quarter_circle_closed_form():
     params, closest, distance = project_points_curve(quarter_circle(-2.0, 3.0), p)
     q = _closest_on_quarter(p)
     assert params.shape == (2000,) and closest.shape == (2000, 2)
-    assert torch.allclose(distance, (p - q).norm(dim=-1), rtol=0, atol=1e-9)
-    assert torch.allclose(closest, q, atol=1e-7)
+    assert_close(distance, (p - q).norm(dim=-1), atol=1e-9)
+    assert_close(closest, q, atol=1e-7)
     assert ((params >= -2) & (params <= 3)).all()
     # beyond the ends: exactly the end parameters
     ends = project_points_curve(quarter_circle(-2.0, 3.0), torch.tensor([[3.0, -1.0], [-1.0, 3.0]], dtype=F64)).params
@@ -284,7 +284,7 @@ def test_curve_in_3d_gradient_and_project_points_accepts_curves():
     assert (res.distance.detach() <= torch.cdist(p, dense).min(1).values + 1e-12).all()
     res.distance.square().sum().backward()
     fd = _fd_check(lambda x: NURBSCurve(x, 3, None, c.weights), cp, p)
-    assert torch.allclose(cp.grad.reshape(-1), fd, rtol=1e-5, atol=1e-7)
+    assert_close(cp.grad.reshape(-1), fd, rtol=1e-5, atol=1e-7)
 
 
 # ---- conventions ------------------------------------------------------------------------
@@ -294,14 +294,14 @@ def test_batch_dims_dtype_and_empty():
     params, closest, distance = project_points(s, p)
     assert params.shape == (2, 5, 2) and closest.shape == (2, 5, 3) and distance.shape == (2, 5)
     flat = project_points(s, p.reshape(10, 3))
-    assert torch.allclose(distance.reshape(-1), flat.distance)
+    assert_close(distance.reshape(-1), flat.distance, atol=1e-12)
     empty = project_points(s, torch.zeros(0, 3, dtype=F64))
     assert empty.params.shape == (0, 2) and empty.distance.shape == (0,)
     # float32 follows the surface and stays close to the float64 answer
     s32 = s.to(torch.float32)
     r32 = project_points(s32, p.reshape(10, 3))
     assert r32.distance.dtype == torch.float32 and r32.params.dtype == torch.float32
-    assert torch.allclose(r32.distance.double(), flat.distance, atol=1e-4)
+    assert_close(r32.distance.double(), flat.distance, atol=1e-4)
 
 
 def test_grid_start_is_the_nearest_sample():
@@ -309,7 +309,7 @@ def test_grid_start_is_the_nearest_sample():
     p = torch.tensor([[2.0, 0.0, 0.5], [0.0, 2.0, 3.5]], dtype=F64)  # two corners of the patch
     assert nearest_grid_params(s, p, grid=5).tolist() == [[-1.0, 0.0], [2.0, 4.0]]
     # an explicit coarse grid still converges (Newton does the rest)
-    assert torch.allclose(project_points(s, p + 0.1, grid=2).distance, project_points(s, p + 0.1).distance, atol=1e-12)
+    assert_close(project_points(s, p + 0.1, grid=2).distance, project_points(s, p + 0.1).distance, atol=1e-12)
 
 
 def test_errors_name_the_problem():

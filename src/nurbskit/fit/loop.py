@@ -37,10 +37,11 @@ import torch
 
 from .. import losses as L
 from ..errors import OptionError
-from ..core.neighbors import NeighborIndex, nearest_neighbors
+from ..core.neighbors import NeighborIndex
 from .config import StageConfig
 from ..core.knots import knots_to_logits
-from .lstsq import equidistributed_knots, foot_points, solve_control_points
+from ..core.project import project_points
+from .lstsq import equidistributed_knots, solve_control_points
 from .matching import one_to_one_matching
 from .params import SurfaceParameters
 
@@ -77,16 +78,14 @@ class Progress:
     parts: dict[str, float] = field(default_factory=dict)
 
 
-class NonFiniteSurface(ArithmeticError):
-    """The surface evaluated to NaN or infinity (a too-long optimiser step)."""
-
-
 @dataclass
 class _State:
-    """What persists between iterations of a stage (matching, foot points)."""
+    """What persists between iterations of a stage (matching, foot points, the search
+    structure on the input points, built once per stage)."""
 
     matched: Tensor | None = None
     foot: Tensor | None = None
+    index: NeighborIndex | None = None
 
 
 def stage_resolution(stage: StageConfig, target: Target, default: tuple[int, int]) -> tuple[int, int]:
@@ -108,8 +107,12 @@ def stage_loss(
     resolution: tuple[int, int],
     state: _State,
     iteration: int,
-) -> tuple[Tensor, dict[str, float]]:
-    """The weighted loss of a stage for the current parameters, and its parts."""
+) -> tuple[Tensor, dict[str, Tensor]]:
+    """The weighted loss of a stage for the current parameters, and its parts (tensors).
+
+    Reads nothing back to the host (no finiteness test, no ``float``): a non-finite
+    surface shows as a non-finite loss, which the caller reads once per iteration.
+    """
     w = stage.loss
     surface = params()
     closed_v = params.closed_v
@@ -124,8 +127,6 @@ def stage_loss(
         gu, gv = surface.grid_axes(resolution)
         grid = surface.evaluate_grid(gu, gv)
         flat = grid.reshape(-1, grid.shape[-1])
-        if not torch.isfinite(flat.detach()).all():
-            raise NonFiniteSurface()
     x = target.points
     if w.l2:
         if target.supervised:
@@ -160,13 +161,16 @@ def stage_loss(
         closest = surface.evaluate(state.foot)
         parts["point_to_surface"] = (closest - x).square().sum(-1).mean()
     if w.coverage:
-        _, idx = nearest_neighbors(flat.detach(), x)
-        parts["coverage"] = (flat - x[idx]).square().sum(-1).mean()
+        if state.index is None:
+            state.index = NeighborIndex(x)
+        # a non-finite surface searches with zeros; its loss is non-finite all the same
+        idx = state.index.indices(torch.nan_to_num(flat.detach(), 0.0, 0.0, 0.0))
+        parts["coverage"] = (flat - x.index_select(0, idx)).square().sum(-1).mean()
     if w.smoothness:
         cp = surface.control_points[:, : params.n_v - params.degrees[1]] if closed_v else surface.control_points
         parts["smoothness"] = L.laplacian_control(cp, closed_v=closed_v)
     total = sum(getattr(w, k) * v for k, v in parts.items())
-    return total, {k: float(v.detach()) for k, v in parts.items()}
+    return total, parts
 
 
 def refresh_state(
@@ -175,33 +179,33 @@ def refresh_state(
     """Update what a step holds fixed: the UM matching and the foot points of the inputs.
 
     Called before each optimiser step, so that every loss evaluation of that step (an
-    L-BFGS line search makes several) sees the same objective.
+    L-BFGS line search makes several) sees the same objective. Foot points come from the
+    one projection (:func:`nurbskit.core.project.project_points`): from the grid in the
+    first iteration, then warm from the last ones with a fixed number of masked Newton
+    iterations, which reads nothing back to the host.
     """
     w = stage.loss
     if not (w.point_to_surface or (w.l2 and stage.rematch_every and not target.supervised)):
         return
     with torch.no_grad():
         surface = params().detach()
-        if not (torch.isfinite(surface.control_points).all() and torch.isfinite(surface.weights).all()):
-            raise OptionError(f"stage {stage.name}: the surface became NaN or infinite; lower the learning rate (lr={stage.lr})")
         if w.l2 and stage.rematch_every and not target.supervised:
             if state.matched is None or iteration % stage.rematch_every == 0:
                 flat = surface.sample(resolution).reshape(-1, target.points.shape[-1])
                 state.matched = one_to_one_matching(flat, target.points)
         if w.point_to_surface:
             every = max(stage.reproject_every, 1)
+            periodic = (False, params.closed_v)
             if state.foot is None:
-                from ..core.project import project_points
-
-                state.foot = project_points(surface, target.points).params
+                state.foot = project_points(surface, target.points, periodic=periodic).params
             elif iteration % every == 0:
                 # Warm start from the last foot points (the surface moves little per step),
-                # restarted from the nearest grid sample every 20 refreshes (a foot point can
-                # jump to another part of the surface).
-                state.foot = foot_points(
-                    surface, target.points, state.foot, params.closed_v, iterations=2,
-                    restart=iteration % (20 * every) == 0,
-                )
+                # also restarted from the nearest grid sample every 20 refreshes (a foot
+                # point can jump to another part of the surface); the closer result wins.
+                state.foot = project_points(
+                    surface, target.points, params=state.foot, periodic=periodic, iterations=3,
+                    restart=iteration % (20 * every) == 0, check_every=0, validate=False,
+                ).params
 
 
 def relocate_knots(params: SurfaceParameters, target: Target) -> None:
@@ -291,11 +295,14 @@ def run_stage(
 
         def closure():
             opt.zero_grad(set_to_none=True)
-            try:
-                loss, parts = stage_loss(params, stage, target, resolution, state, it)
-            except NonFiniteSurface:
-                loss, parts = None, {}
-            if loss is None or not torch.isfinite(loss.detach()):
+            loss, parts = stage_loss(params, stage, target, resolution, state, it)
+            if not record:
+                # The one read of the iteration: the loss and its parts together.
+                values = torch.stack([loss.detach(), *(v.detach() for v in parts.values())]).tolist()
+                value, part_values = values[0], dict(zip(parts, values[1:]))
+            else:
+                value = float(loss.detach())  # an L-BFGS line search: torch reads it anyway
+            if not math.isfinite(value):
                 if stage.optimizer != "lbfgs" or not record:
                     raise OptionError(
                         f"stage {stage.name}: the surface became NaN or infinite at iteration {it}; "
@@ -308,7 +315,7 @@ def run_stage(
                 return torch.tensor(1e30, dtype=tensors[0].dtype, device=tensors[0].device)
             loss.backward()
             if not record:
-                record.update(loss=float(loss.detach()), parts=parts)
+                record.update(loss=value, parts=part_values)
             return loss
 
         opt.step(closure)

@@ -27,6 +27,7 @@ import torch
 
 from ..core import NURBSSurface
 from ..core.basis import basis_matrix
+from ..core.project import project_points
 from .params import Topology, expand
 
 Tensor = torch.Tensor
@@ -136,73 +137,6 @@ def solve_control_points(
     return expand(P, index, n_u, n_v)
 
 
-def foot_points(
-    surface: NURBSSurface,
-    points: Tensor,
-    params: Tensor | None = None,
-    closed_v: bool = False,
-    iterations: int = 6,
-    grid: int = 48,
-    restart: bool = False,
-) -> Tensor:
-    """Parameters of the closest surface points (no gradient).
-
-    Shapes: ``points (N, 3)``, optional starting ``params (N, 2)`` -> ``(N, 2)``.
-    Starts from the nearest sample of a ``grid x grid`` parametric grid (or from
-    ``params``), then damped Gauss-Newton steps on ``|S(u, v) - x|^2``, clamped to the
-    domain (wrapped along a closed v). With ``params`` and ``restart=True`` both starts
-    are refined and the closer result is kept per point. Used by the alternation, where only the foot
-    parameters matter; :func:`nurbskit.core.project.project_points` is the public
-    projection with envelope-theorem gradients.
-    """
-    if restart and params is not None:
-        a = foot_points(surface, points, params, closed_v, iterations, grid)
-        b = foot_points(surface, points, None, closed_v, iterations, grid)
-        with torch.no_grad():
-            da = (surface.evaluate(a) - points).square().sum(-1)
-            db = (surface.evaluate(b) - points).square().sum(-1)
-            return torch.where((db < da).unsqueeze(-1), b, a)
-    with torch.no_grad():
-        (u0, u1), (v0, v1) = surface.domain
-        if params is None:
-            from scipy.spatial import cKDTree
-
-            gu, gv = surface.grid_axes((grid, grid))
-            samples = surface.evaluate_grid(gu, gv).reshape(-1, points.shape[-1])
-            _, idx = cKDTree(samples.cpu().numpy()).query(points.detach().cpu().numpy())
-            idx = torch.as_tensor(idx, device=points.device)
-            params = torch.stack([gu[idx // grid], gv[idx % grid]], dim=-1)
-        uv = params.clone()
-        for _ in range(iterations):
-            d = surface.derivatives(uv, order=1)
-            r = d[:, 0, 0] - points
-            su, sv = d[:, 1, 0], d[:, 0, 1]
-            # 2x2 normal equations of Gauss-Newton with a Levenberg damping term.
-            a = (su * su).sum(-1)
-            b = (su * sv).sum(-1)
-            c = (sv * sv).sum(-1)
-            g1 = (su * r).sum(-1)
-            g2 = (sv * r).sum(-1)
-            mu = 1e-9 * (a + c) + 1e-30
-            a, c = a + mu, c + mu
-            det = a * c - b * b
-            du = -(c * g1 - b * g2) / det
-            dv = -(a * g2 - b * g1) / det
-            # Limit a step to a quarter of the domain: the model is local.
-            du = du.clamp(-(u1 - u0) / 4, (u1 - u0) / 4)
-            dv = dv.clamp(-(v1 - v0) / 4, (v1 - v0) / 4)
-            new = torch.stack([uv[:, 0] + du, uv[:, 1] + dv], dim=-1)
-            new[:, 0] = new[:, 0].clamp(u0, u1)
-            if closed_v:
-                new[:, 1] = v0 + torch.remainder(new[:, 1] - v0, v1 - v0)
-            else:
-                new[:, 1] = new[:, 1].clamp(v0, v1)
-            # Keep a step only where it does not increase the distance.
-            better = (surface.evaluate(new) - points).square().sum(-1) <= r.square().sum(-1)
-            uv = torch.where(better.unsqueeze(-1), new, uv)
-        return uv
-
-
 def alternate(
     surface: NURBSSurface,
     points: Tensor,
@@ -216,15 +150,23 @@ def alternate(
     """Alternate foot-point projection and least-squares control points.
 
     Shapes: ``points (N, 3)`` -> (surface, foot parameters ``(N, 2)``, mean squared
-    distance after each round). Knots and weights stay as they are. Stops early when
+    distance after each round). Knots and weights stay as they are. Foot points come
+    from :func:`nurbskit.core.project.project_points` (a closed v is its periodic
+    direction); ``params`` is accepted for compatibility and ignored in the first round. Stops early when
     a round improves the mean squared distance by less than ``tolerance``.
     """
     topo = _topology(topology)
-    closed_v = topo.closed_v
+    periodic = (False, topo.closed_v)
     history: list[float] = []
+
+    def feet(surface, warm):
+        # The one projection (core.project): from the grid in the first round, then warm
+        # from the last round's foot points (the least-squares step moves the surface little).
+        return project_points(surface, points, params=warm, periodic=periodic, iterations=32 if warm is None else 8).params
+
     with torch.no_grad():
         for k in range(rounds):
-            params = foot_points(surface, points, params if k > 0 else None, closed_v, iterations=6 if k == 0 else 3)
+            params = feet(surface, params if k > 0 else None)
             err = float((surface.evaluate(params) - points).square().sum(-1).mean())
             history.append(err)
             if callback is not None:
@@ -237,7 +179,7 @@ def alternate(
             )
             surface = surface._replace(control_points=cp)
         if rounds > 0:
-            params = foot_points(surface, points, params, closed_v, iterations=3)
+            params = feet(surface, params)
     return surface, params, history
 
 
