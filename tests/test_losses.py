@@ -7,6 +7,7 @@ import math
 import pytest
 import torch
 import torch.nn.functional as F
+from _assert import assert_close
 
 from nurbskit import NURBSSurface
 from nurbskit import losses as L
@@ -374,3 +375,39 @@ def test_docstring_examples_run():
     import doctest
 
     assert doctest.testmod(L, raise_on_error=False).failed == 0
+
+
+# ---- batches and host reads -------------------------------------------------------------
+
+def test_chamfer_and_hausdorff_broadcast_one_cloud_against_a_batch():
+    x, y = _rand(2, 3, 12, 3, seed=40), _rand(9, 3, seed=41)
+    out = L.chamfer_distance(x, y)
+    hd = L.hausdorff_distance(x, y)
+    assert out.shape == (2, 3) and hd.shape == (2, 3)
+    for a in range(2):
+        for b in range(3):
+            assert_close(out[a, b], L.chamfer_distance_naive(x[a, b], y), atol=1e-15)
+            assert_close(hd[a, b], L.hausdorff_distance_naive(x[a, b], y), atol=1e-15)
+    with pytest.raises(NurbskitError, match="do not broadcast"):
+        L.chamfer_distance(_rand(2, 5, 3), _rand(3, 5, 3))
+
+
+def test_chamfer_reads_nothing_back_to_the_host():
+    from nurbskit._opcount import OperationCounter
+
+    x = _rand(4, 300, 3, seed=42).requires_grad_(True)
+    y = _rand(4, 200, 3, seed=43)
+    with OperationCounter() as count:
+        loss = L.chamfer_distance(x, y).sum()
+        loss.backward()
+    assert count.host_reads == 0, count.host_read_names()
+    assert count.operations < 200  # a handful per batch element, not per point
+
+
+def test_point_to_surface_on_batched_points_equals_a_loop():
+    sphere = _sphere_octant()
+    pts, _, _ = _octant_points(24, seed=44)
+    batched = L.point_to_surface_distance(sphere, pts.reshape(3, 8, 3), "none")
+    assert batched.shape == (3, 8)
+    for b in range(3):
+        assert_close(batched[b], L.point_to_surface_distance(sphere, pts.reshape(3, 8, 3)[b], "none"), atol=0)

@@ -73,6 +73,14 @@ def _directed_sq_dists(x: Tensor, y: Tensor) -> tuple[Tensor, Tensor]:
         raise NurbskitError(
             f"both point clouds need at least one point; got x {tuple(x.shape)} and y {tuple(y.shape)}"
         )
+    try:
+        batch = torch.broadcast_shapes(x.shape[:-2], y.shape[:-2])
+    except RuntimeError:
+        raise NurbskitError(
+            f"the batch shapes of x {tuple(x.shape)} and y {tuple(y.shape)} do not broadcast"
+        ) from None
+    x = x.expand(*batch, *x.shape[-2:])
+    y = y.expand(*batch, *y.shape[-2:])
     _, ix = nearest_neighbors(x, y)
     _, iy = nearest_neighbors(y, x)
     return _gathered_sq_dist(x, y, ix), _gathered_sq_dist(y, x, iy)
@@ -134,14 +142,16 @@ def chamfer_distance(
     ``CD(X, Y) = A(min_y ||x - y||^2 over x in X) + A(min_x ||x - y||^2 over y in Y)``
     where ``A`` is the mean (``reduction="mean"``) or the sum (``"sum"``, exactly eq. 2.7).
 
-    Shapes: ``x (*, N, D)``, ``y (*, M, D)`` with equal batch shapes ``*``; N and M may
-    differ -> ``(*)``. With ``return_parts=True`` returns ``(total, x_to_y, y_to_x)``,
+    Shapes: ``x (*, N, D)``, ``y (*, M, D)`` with batch shapes that broadcast (one cloud
+    against a batch of clouds); N and M may differ -> ``(*)``. With ``return_parts=True`` returns ``(total, x_to_y, y_to_x)``,
     each ``(*)``.
 
     Convention: nearest neighbours are found without gradient (KD-tree on CPU, chunked
     cdist on CUDA) and the squared distances recomputed by gathering, so the gradient
     with respect to both clouds is exact wherever each nearest neighbour is unique.
-    Memory is ``O(N + M)`` on CPU. Both clouds must be non-empty.
+    Memory is ``O(N + M)`` on CPU. Both clouds must be non-empty. Nothing is read back
+    to the host as a torch operation (the KD-tree works on the CPU copy it searches;
+    on CUDA the tiled search stays on the device).
 
     Example:
         >>> import torch

@@ -203,8 +203,8 @@ def refresh_state(
                 # also restarted from the nearest grid sample every 20 refreshes (a foot
                 # point can jump to another part of the surface); the closer result wins.
                 state.foot = project_points(
-                    surface, target.points, params=state.foot, periodic=periodic, iterations=3,
-                    restart=iteration % (20 * every) == 0, check_every=0, validate=False,
+                    surface, target.points, params=state.foot, periodic=periodic, iterations=2,
+                    restart=iteration % (20 * every) == 0, check_every=0, validate=False, second_order=False,
                 ).params
 
 

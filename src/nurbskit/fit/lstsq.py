@@ -162,7 +162,9 @@ def alternate(
     def feet(surface, warm):
         # The one projection (core.project): from the grid in the first round, then warm
         # from the last round's foot points (the least-squares step moves the surface little).
-        return project_points(surface, points, params=warm, periodic=periodic, iterations=32 if warm is None else 8).params
+        if warm is None:
+            return project_points(surface, points, periodic=periodic).params
+        return project_points(surface, points, params=warm, periodic=periodic, iterations=3, second_order=False).params
 
     with torch.no_grad():
         for k in range(rounds):
