@@ -411,3 +411,58 @@ def test_projection_across_a_periodic_seam_is_exact():
     # float32: the same points to float32 rounding
     r32 = project_points(s.to(torch.float32), p.float())
     assert_close(r32.distance, truth.float(), atol=2e-6)
+
+
+# ---- host reads, batches, warm starts ------------------------------------------------------
+def test_warm_projection_in_a_loop_reads_nothing_back():
+    from nurbskit._opcount import OperationCounter
+
+    s = closed_cylinder()
+    p, truth = _seam_points()
+    first = project_points(s, p)
+    with OperationCounter() as count:
+        warm = project_points(s, p, params=first.params, periodic=(False, True), iterations=3, check_every=0,
+                              validate=False)
+    assert count.host_reads == 0, count.host_read_names()
+    assert_close(warm.distance, truth, atol=1e-12)
+    # the default call reads a bounded number of values, independent of the number of points
+    with OperationCounter() as small:
+        project_points(s, p[:100])
+    with OperationCounter() as large:
+        project_points(s, p)
+    assert small.host_reads <= 40 and large.host_reads <= 40
+
+
+def test_warm_start_and_restart():
+    s = cylinder_quarter()
+    g = torch.Generator().manual_seed(50)
+    p = torch.rand(200, 3, dtype=F64, generator=g) * 3
+    cold = project_points(s, p)
+    # a warm start at the answer stays there; a bad warm start with restart recovers it
+    assert_close(project_points(s, p, params=cold.params).distance, cold.distance, atol=1e-12)
+    bad = torch.full_like(cold.params, 0.5)
+    fixed = project_points(s, p, params=bad, restart=True)
+    assert_close(fixed.distance, cold.distance, atol=1e-12)
+
+
+def _batched(spline, cps, ws, kvs=None):
+    """A batched spline object (the loop at project_points' boundary takes it apart)."""
+    return spline._replace(control_points=cps, weights=ws, knot_vectors=kvs or list(spline.knot_vectors))
+
+
+def test_batched_surfaces_project_like_a_loop():
+    base = cylinder_quarter()
+    g = torch.Generator().manual_seed(51)
+    cps = torch.stack([base.control_points * (1 + 0.1 * i) for i in range(3)])  # (3, 3, 2, 3)
+    ws = base.weights.expand(3, 3, 2).clone()
+    kvs = [torch.stack([base.knot_vectors[0]] * 3), base.knot_vectors[1]]  # per element and shared
+    batch = _batched(base, cps, ws, kvs)
+    p = torch.rand(3, 40, 3, dtype=F64, generator=g) * 3
+    res = project_points(batch, p)
+    assert res.params.shape == (3, 40, 2) and res.distance.shape == (3, 40)
+    for i in range(3):
+        one = project_points(base._replace(control_points=cps[i]), p[i])
+        assert torch.equal(res.params[i], one.params)
+        assert torch.equal(res.distance[i], one.distance)
+    with pytest.raises(NurbskitError, match="spline batch"):
+        project_points(batch, p[:2])

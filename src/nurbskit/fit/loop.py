@@ -86,6 +86,7 @@ class _State:
     matched: Tensor | None = None
     foot: Tensor | None = None
     index: NeighborIndex | None = None
+    axes: list[Tensor] | None = None  # the sampling grid; the domain's ends stay fixed in a stage
 
 
 def stage_resolution(stage: StageConfig, target: Target, default: tuple[int, int]) -> tuple[int, int]:
@@ -124,8 +125,9 @@ def stage_loss(
     parts: dict[str, Tensor] = {}
     grid = flat = None
     if needs_grid:
-        gu, gv = surface.grid_axes(resolution)
-        grid = surface.evaluate_grid(gu, gv)
+        if state.axes is None:
+            state.axes = surface.grid_axes(resolution)  # reads the domain once per stage
+        grid = surface.evaluate_grid(*state.axes)
         flat = grid.reshape(-1, grid.shape[-1])
     x = target.points
     if w.l2:
