@@ -466,3 +466,23 @@ def test_batched_surfaces_project_like_a_loop():
         assert torch.equal(res.distance[i], one.distance)
     with pytest.raises(NurbskitError, match="spline batch"):
         project_points(batch, p[:2])
+
+
+def test_coarse_to_fine_grid_search_finds_the_nearest_sample(monkeypatch):
+    # The accelerators' two-level start search (sub-grid, then a window of the full grid),
+    # run on the CPU: on a smooth patch it finds the exact nearest sample, and the
+    # projection from it is the projection from the exact start.
+    from nurbskit.core import project as P
+
+    s = cylinder_quarter()
+    g = torch.Generator().manual_seed(52)
+    p = torch.rand(3000, 3, dtype=F64, generator=g) * 3
+    axes = s.grid_axes((40, 33))
+    samples = s.evaluate_grid(*axes).reshape(-1, 3)
+    fast = P._coarse_to_fine(samples, (40, 33), p)
+    exact = torch.cdist(p, samples).argmin(1)
+    assert_close((samples[fast] - p).norm(dim=-1), (samples[exact] - p).norm(dim=-1), atol=0)
+    plain = project_points(s, p)
+    monkeypatch.setattr(P, "_use_coarse", lambda device, pairs: True)
+    coarse = project_points(s, p)
+    assert_close(coarse.distance, plain.distance, atol=1e-12)

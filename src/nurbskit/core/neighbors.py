@@ -11,7 +11,7 @@ which gives the exact gradient wherever the nearest neighbour is unique.
   for repeated queries against a fixed reference (the fit's input points). Memory is
   ``O((N + M) * D)``: no ``N x M`` matrix is ever built.
 * **CUDA**: exact distances over tiles of query rows (at most ``chunk_bytes`` of
-  distances per tile) reduced to a running minimum: one kernel per tile, no host read.
+  distances per tile) reduced by ``argmin`` per tile: a few kernels per tile, no host read.
 
 Convention (the cancellation-safe distance, everywhere): distances are differences
 first, squares second, ``sum_d (q_d - r_d)^2``. The GEMM shortcut
@@ -66,11 +66,22 @@ def _check_finite_numpy(name: str, a: np.ndarray) -> None:
         raise NurbskitError(f"{name} points contain NaN or infinite values")
 
 
+def _tile_sq_dists(q: Tensor, r: Tensor) -> Tensor:
+    """Exact squared distances ``(rows, M)`` of a tile, difference first, one coordinate
+    at a time (``rows x M`` memory, never ``rows x M x D``); no GEMM shortcut."""
+    d = (q[:, None, 0] - r[None, :, 0]).square()
+    for c in range(1, q.shape[1]):
+        d.add_((q[:, None, c] - r[None, :, c]).square())
+    return d
+
+
 def _index_cdist(query: Tensor, reference: Tensor, chunk_bytes: int, count: int = 1) -> Tensor:
     """Indices ``(N,)`` (``(N, count)`` when ``count > 1``) of the nearest reference rows.
 
     Tiles of query rows against the whole reference, each holding at most ``chunk_bytes``
-    of distances, with the direct (difference-first) kernel; no host read.
+    of distances, with the exact difference-first distance (:func:`_tile_sq_dists`; the
+    running minimum is the per-tile ``argmin``); no host read. (``torch.cdist``'s direct
+    kernel is exact too but measured at under 1e9 pairs/s on an H100.)
     """
     n, m = query.shape[0], reference.shape[0]
     count = min(count, m)
@@ -80,7 +91,7 @@ def _index_cdist(query: Tensor, reference: Tensor, chunk_bytes: int, count: int 
     shape = (n,) if count == 1 else (n, count)
     out = torch.empty(shape, dtype=torch.int64, device=query.device)
     for start in range(0, n, rows):
-        d = torch.cdist(q[start : start + rows], r, compute_mode="donot_use_mm_for_euclid_dist")
+        d = _tile_sq_dists(q[start : start + rows], r)
         if count == 1:
             out[start : start + rows] = d.argmin(dim=-1)
         else:

@@ -1,0 +1,180 @@
+"""How the default surface fit scales with the number of points, on the CPU or a GPU.
+
+Question (issue 16): how long does ``fit_surface(points, "default")`` take at 5k, 20k,
+100k and 1M points, how many loop iterations does it run, what does one iteration cost,
+and how many aten operations and host reads does an iteration make? GPU goals: 20k
+within 1.5 s, 100k within 3 s, 1M within 20 s, with the same result as on the CPU.
+
+Method: the smooth open patch of ``bench_fit_goals.py`` (a 6 x 6 bicubic net with random
+heights, 0.1 % noise) sampled at N random parameters, float64, the default pipeline
+(which fits a seeded random subset of at most ``max_points`` = 20,000 points and keeps
+all N as the result's points). One warm-up fit of 200 points pays for imports and, on a
+GPU, for the CUDA context. Then per size: one timed fit (wall-clock seconds, the loop's
+seconds and iterations, the alternation's rounds) and the mean input-to-surface distance
+of the fitted surface over (a subset of) the points, in units of the bounding-box
+diagonal. Operations and host reads per iteration come from a second fit of the same
+points under ``nurbskit._opcount.OperationCounter``: the counter's totals are read in the
+progress callback after every loop iteration, and the differences between consecutive
+callbacks are one iteration's counts (the optimiser's own reads included: torch's
+L-BFGS reads its scalars in the line search). ``--compare-cpu`` also fits the sizes up to
+20k on the CPU in the same process and reports the largest distance between the two
+fitted surfaces (64 x 64 samples of each projected onto the other, over the diagonal; the
+parametrisations may differ by the sign of a principal axis).
+
+Usage: ``python benchmarks/bench_fit_scale.py [--device cpu|cuda] [--sizes 5000 20000 ...]
+[--skip-1m] [--compare-cpu] [--threads 2] [--out FILE]``; writes
+``benchmarks/results/fit_scale.{json,md}`` (``results/gpu/`` for CUDA).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import write_results  # noqa: E402
+from bench_fit_goals import smooth_patch  # noqa: E402
+
+F64 = torch.float64
+
+
+def _config(device: str):
+    from nurbskit.fit import get_pipeline
+
+    return dataclasses.replace(get_pipeline("default"), device=device)
+
+
+def _mean_distance(surface, points, device, limit: int = 200_000) -> float:
+    from nurbskit.core.project import project_points
+
+    pts = points
+    if pts.shape[0] > limit:
+        pick = torch.randperm(pts.shape[0], generator=torch.Generator().manual_seed(1))[:limit]
+        pts = pts[pick.to(pts.device)]
+    s = surface.detach().to(device=device, dtype=F64)
+    with torch.no_grad():
+        d = project_points(s, pts.to(device=device, dtype=F64)).distance
+    diag = float((points.max(0).values - points.min(0).values).norm())
+    return float(d.mean()) / diag
+
+
+def _surface_gap(a, b, points) -> float:
+    """Largest distance between two fitted surfaces (64 x 64 samples of each projected onto
+    the other), over the diagonal: independent of their parametrisations (a principal
+    axis may come out with the opposite sign on another device)."""
+    from nurbskit.core.project import project_points
+
+    a = a.detach().to(device="cpu", dtype=F64)
+    b = b.detach().to(device="cpu", dtype=F64)
+    gap = max(float(project_points(b, a.sample((64, 64)).reshape(-1, 3)).distance.max()),
+              float(project_points(a, b.sample((64, 64)).reshape(-1, 3)).distance.max()))
+    return gap / float((points.max(0).values - points.min(0).values).norm())
+
+
+def _sync(device: str) -> None:
+    if device == "cuda":
+        torch.cuda.synchronize()
+
+
+def fit_once(points, device: str) -> dict:
+    from nurbskit.fit import fit_surface
+
+    _sync(device)
+    t0 = time.perf_counter()
+    result = fit_surface(points.to(device), _config(device))
+    _sync(device)
+    seconds = time.perf_counter() - t0
+    return {
+        "result": result,
+        "seconds": seconds,
+        "loop_seconds": result.loop_seconds,
+        "iterations": result.iterations,
+        "alternation_rounds": len(result.alternation),
+        "s_per_iteration": result.seconds_per_iteration,
+    }
+
+
+def count_per_iteration(points, device: str) -> dict:
+    from nurbskit._opcount import OperationCounter
+    from nurbskit.fit import fit_surface
+
+    marks = []
+    with OperationCounter() as count:
+        fit_surface(points.to(device), _config(device),
+                    callback=lambda progress: marks.append((count.operations, count.host_reads)))
+    ops = [b[0] - a[0] for a, b in zip(marks, marks[1:])]
+    reads = [b[1] - a[1] for a, b in zip(marks, marks[1:])]
+    return {
+        "ops_per_iteration": statistics.median(ops) if ops else 0,
+        "host_reads_per_iteration": statistics.median(reads) if reads else 0,
+        "host_read_ops": dict(count.host_reads_by_name),
+        "ops_total": count.operations,
+        "host_reads_total": count.host_reads,
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[5_000, 20_000, 100_000, 1_000_000])
+    parser.add_argument("--skip-1m", action="store_true", help="skip sizes >= 1,000,000 (minutes on a small CPU)")
+    parser.add_argument("--compare-cpu", action="store_true", help="also fit sizes <= 20k on the CPU and compare")
+    parser.add_argument("--count-sizes", type=int, nargs="+", default=[5_000, 20_000],
+                        help="sizes whose iterations are also counted (a second fit each)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", help="also write the JSON rows here")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    device = args.device
+    if device == "cuda" and not torch.cuda.is_available():
+        print("CUDA requested but not available", file=sys.stderr)
+        return 2
+    sizes = [n for n in args.sizes if not (args.skip_1m and n >= 1_000_000)]
+
+    fit_once(smooth_patch(200, 0.001, 99), device)  # warm-up
+    rows = []
+    for n in sizes:
+        points = smooth_patch(n, 0.001, seed=0)
+        run = fit_once(points, device)
+        result = run.pop("result")
+        row = {"points": n, "device": device, **run,
+               "to_surface_mean": _mean_distance(result.surface, points, device)}
+        if n in args.count_sizes:
+            row.update(count_per_iteration(points, device))
+        if args.compare_cpu and device != "cpu" and n <= 20_000:
+            cpu = fit_once(points, "cpu")
+            row["cpu_seconds"] = cpu["seconds"]
+            row["cpu_iterations"] = cpu["iterations"]
+            row["max_surface_difference_vs_cpu"] = _surface_gap(result.surface, cpu["result"].surface, points)
+            row["cpu_to_surface_mean"] = _mean_distance(cpu["result"].surface, points, "cpu")
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+
+    columns = [
+        ("points", "points"), ("seconds", "fit s"), ("iterations", "loop iterations"),
+        ("alternation_rounds", "alternation rounds"), ("s_per_iteration", "s / iteration"),
+        ("ops_per_iteration", "aten ops / iteration"), ("host_reads_per_iteration", "host reads / iteration"),
+        ("to_surface_mean", "to-surface mean / diag"), ("max_surface_difference_vs_cpu", "max gap to CPU fit / diag"),
+    ]
+    notes = ("Default pipeline, float64, smooth patch with 0.1 % noise (bench_fit_goals.py); the fit uses a seeded "
+             "random subset of at most 20,000 points (max_points). Ops and host reads per iteration: median over the "
+             "loop iterations after the first, counted in a second fit (torch's L-BFGS line search included).")
+    if args.skip_1m and any(n >= 1_000_000 for n in args.sizes):
+        notes += " The 1M-point size was skipped (--skip-1m)."
+    write_results("fit_scale", rows, columns, meta={"device": device, "sizes": sizes},
+                  title=f"Default fit at growing point counts ({device})", notes=notes,
+                  subdir="gpu" if device == "cuda" else "")
+    if args.out:
+        Path(args.out).write_text(json.dumps(rows, indent=2, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
