@@ -486,3 +486,20 @@ def test_coarse_to_fine_grid_search_finds_the_nearest_sample(monkeypatch):
     monkeypatch.setattr(P, "_use_coarse", lambda device, pairs: True)
     coarse = project_points(s, p)
     assert_close(coarse.distance, plain.distance, atol=1e-12)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_cuda_projection_matches_cpu(dtype, monkeypatch):
+    # the accelerator path (tiled exact search, coarse-to-fine start, masked Newton)
+    s = closed_cylinder().to(dtype)
+    p, truth = _seam_points()
+    p = p.to(dtype)
+    cpu = project_points(s, p)
+    gpu = project_points(s.to("cuda"), p.cuda())
+    assert_close(gpu.distance.cpu(), cpu.distance, atol=1e-12 if dtype == F64 else 2e-6)
+    from nurbskit.core import project as P
+
+    monkeypatch.setattr(P, "_COARSE_PAIRS", 0)
+    coarse = project_points(s.to("cuda"), p.cuda())
+    assert_close(coarse.distance.cpu(), truth.to(dtype), atol=1e-12 if dtype == F64 else 2e-6)

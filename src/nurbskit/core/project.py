@@ -3,17 +3,22 @@
 Point inversion after The NURBS Book, section 6.1 (Newton iteration on the parameters
 from a good start point), vectorised over all points and made robust for a box domain:
 
-1. **Start** at the nearest sample of a uniform parametric grid (a KD-tree on CPU,
-   chunked ``torch.cdist`` elsewhere).
+1. **Start** at the nearest sample of a uniform parametric grid (:mod:`.neighbors`: a
+   KD-tree on CPU; on accelerators tiled exact distances, or for large inputs a
+   coarse-to-fine search of the grid), or at given parameters (a warm start).
 2. **Newton** on ``f(t) = |C(t) - x|^2 / 2``: gradient ``g = J r``, Hessian
    ``H = J J^T + sum_d r_d * d^2 C_d`` with ``r = C(t) - x`` and ``J`` the first
    derivatives (rows ``C_u``, ``C_v``): the spline's derivatives up to order 2 (A2.3
    basis derivatives and the rational quotient rule, as ``derivatives(order=2)``).
+   Iterations are masked (a converged point is frozen with ``torch.where``), so one
+   iteration reads nothing back to the host; convergence is checked every few.
 3. **Bounds** (projected Newton with an active set; D. P. Bertsekas, "Projected Newton
    methods for optimization problems with simple constraints", 1982): a parameter that sits on
    the edge of the domain while the gradient or the Newton step points outward is held
    there, and Newton continues on the remaining parameter alone, i.e. on the boundary
-   curve. A step that would leave the domain is clamped.
+   curve. A step that would leave the domain is clamped. A **periodic** direction
+   (periodic knot spacing, the last ``p`` control columns repeating the first ``p``) has
+   no edge: the step crosses the seam and the parameter wraps into the domain.
 4. **Descent guard**: where ``H`` is not positive definite the step uses the
    Levenberg-Marquardt matrix ``J J^T + mu I`` instead (always a descent direction);
    a step that does not lower ``f`` is rejected and halved on the next iteration.
@@ -25,8 +30,10 @@ at the fixed minimiser) gradients of ``distance`` reach control points, weights 
 exactly, and reach ``points`` through ``points - closest``.
 
 Convention: ``params`` are in the knot domain, ``(N, 2)`` for a surface and ``(N,)`` for a
-curve (the shape :meth:`evaluate` takes); they lie in the closed domain, edges included.
-Leading batch dimensions of ``points`` are kept: ``(..., N, dim)`` -> ``(..., N, 2)``,
+curve (the shape :meth:`evaluate` takes); they lie in the closed domain, edges included
+(``[start, end)`` along a periodic direction). A batched spline (control points
+``(*B, n_1, ..., dim)``) takes points ``(*B, N, dim)``, one cloud per element.
+Otherwise leading batch dimensions of ``points`` are kept: ``(..., N, dim)`` -> ``(..., N, 2)``,
 ``(..., N, dim)``, ``(..., N)``. Where the closest point is not unique (the centre of a
 sphere) one of the minimisers is returned. Not handled: the gradient through the domain
 ends themselves (a foot point held on the edge ``u = knots[p]`` does not follow that knot).
