@@ -15,8 +15,9 @@ Method (see benchmarks/README_losses.md):
 * the full-matrix version is skipped where its estimate exceeds ``--max-full-gib``;
 * where both run, the two values are compared (they must agree).
 
-Usage: ``python benchmarks/bench_chamfer.py [--quick]``; writes
-``benchmarks/results/chamfer.json`` and ``benchmarks/results/chamfer.md``.
+Usage: ``python benchmarks/bench_chamfer.py [--quick] [--device cpu|cuda]``; writes
+``benchmarks/results/chamfer.json`` and ``benchmarks/results/chamfer.md`` (``results/gpu/``
+for CUDA, where the "KD-tree" column is the tiled exact search and memory is the device's).
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def _rss_bytes() -> int:
     return 0
 
 
-def run_case(method: str, n: int, repeats: int, seed: int) -> dict:
+def run_case(method: str, n: int, repeats: int, seed: int, device: str = "cpu") -> dict:
     """Time one (method, N) case in this process (called in a child)."""
     import torch
 
@@ -69,8 +70,9 @@ def run_case(method: str, n: int, repeats: int, seed: int) -> dict:
 
     torch.set_num_threads(THREADS)
     g = torch.Generator().manual_seed(seed)
-    x0 = torch.rand(n, DIM, generator=g)
-    y0 = torch.rand(n, DIM, generator=g)
+    x0 = torch.rand(n, DIM, generator=g).to(device)
+    y0 = torch.rand(n, DIM, generator=g).to(device)
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
 
     def full_chamfer(x, y):
         # torch's default mode (matrix-multiply formula above 25 rows): the fast, usual peer
@@ -82,10 +84,13 @@ def run_case(method: str, n: int, repeats: int, seed: int) -> dict:
     def once():
         x = x0.clone().requires_grad_(True)
         y = y0.clone().requires_grad_(True)
+        sync()
         start = time.perf_counter()
         value = fn(x, y)
+        sync()
         mid = time.perf_counter()
         value.backward()
+        sync()
         end = time.perf_counter()
         return end - start, mid - start, float(value)
 
@@ -99,6 +104,8 @@ def run_case(method: str, n: int, repeats: int, seed: int) -> dict:
         times.append(t)
         forward.append(f)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    if device == "cuda":  # device memory instead of the host's
+        baseline, peak = 0, torch.cuda.max_memory_allocated()
     return {
         "method": method,
         "n": n,
@@ -114,9 +121,9 @@ def run_case(method: str, n: int, repeats: int, seed: int) -> dict:
     }
 
 
-def _child(method: str, n: int, repeats: int, seed: int) -> dict:
+def _child(method: str, n: int, repeats: int, seed: int, device: str = "cpu") -> dict:
     env = dict(os.environ, OMP_NUM_THREADS=str(THREADS), MKL_NUM_THREADS=str(THREADS))
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--case", method, str(n), str(repeats), str(seed)]
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--case", method, str(n), str(repeats), str(seed), device]
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     if out.returncode != 0:
         return {"method": method, "n": n, "m": n, "error": out.stderr.strip().splitlines()[-1:] or ["failed"]}
@@ -129,7 +136,7 @@ def _fmt(v, spec):
 
 def write_markdown(report: dict, path: Path) -> None:
     lines = [
-        "# Chamfer forward + backward (CPU)",
+        f"# Chamfer forward + backward ({report.get('device', 'cpu')})",
         "",
         f"{report['date']}, torch {report['torch']}, scipy {report['scipy']}, {report['threads']} threads, "
         f"{report['cpu_count']} cores, load average at start {report['load_average_start']}.",
@@ -171,12 +178,14 @@ def main(argv=None) -> int:
     parser.add_argument("--max-full-gib", type=float, default=2.0, help="skip the full matrix above this estimate")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for chamfer.json and chamfer.md")
-    parser.add_argument("--case", nargs=4, help=argparse.SUPPRESS)
+    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"],
+                        help="cuda: tiled exact search on the GPU, memory = torch.cuda.max_memory_allocated")
+    parser.add_argument("--case", nargs=5, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
     if args.case:
-        method, n, repeats, seed = args.case
-        print(json.dumps(run_case(method, int(n), int(repeats), int(seed))))
+        method, n, repeats, seed, device = args.case
+        print(json.dumps(run_case(method, int(n), int(repeats), int(seed), device)))
         return 0
 
     import scipy
@@ -186,10 +195,10 @@ def main(argv=None) -> int:
     repeats = args.repeats or (3 if args.quick else 5)
     rows = []
     for n in sizes:
-        kd = _child("kdtree", n, repeats, args.seed)
+        kd = _child("kdtree", n, repeats, args.seed, args.device)
         row = {"n": n, "kdtree": kd, "full_estimate_mib": estimate_bytes("full", n, n) / 2**20}
         if estimate_bytes("full", n, n) <= args.max_full_gib * 2**30:
-            full = _child("full", n, repeats, args.seed)
+            full = _child("full", n, repeats, args.seed, args.device)
             row["full"] = full
             if "median_s" in kd and "median_s" in full:
                 row["speedup"] = full["median_s"] / kd["median_s"]
@@ -204,7 +213,7 @@ def main(argv=None) -> int:
         "torch": torch.__version__,
         "scipy": scipy.__version__,
         "python": platform.python_version(),
-        "device": "cpu",
+        "device": args.device,
         "dtype": "float32",
         "dim": DIM,
         "threads": THREADS,
@@ -215,6 +224,8 @@ def main(argv=None) -> int:
         "data": "two independent uniform clouds in the unit cube, N = M",
         "rows": rows,
     }
+    if args.device == "cuda" and args.out == RESULTS:
+        args.out = RESULTS / "gpu"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "chamfer.json").write_text(json.dumps(report, indent=2) + "\n")
     write_markdown(report, args.out / "chamfer.md")
