@@ -438,11 +438,9 @@ def _batch_shape(spline) -> tuple[int, ...]:
 
 def _element(spline, i: int, batch: tuple[int, ...]):
     """Element ``i`` (flat index) of a batched spline: knots shared ``(m,)`` or per element ``(*B, m)``."""
-    k = spline.para_dim
     cp = spline.control_points.reshape(-1, *spline.control_points.shape[len(batch):])[i]
     w = spline.weights.reshape(-1, *spline.weights.shape[len(batch):])[i]
     kvs = [kv if kv.ndim == 1 else kv.reshape(-1, kv.shape[-1])[i] for kv in spline.knot_vectors]
-    assert cp.ndim == k + 1
     return spline._replace(control_points=cp, weights=w, knot_vectors=kvs)
 
 
