@@ -76,14 +76,15 @@ class NURBSSurface(TensorSpline):
     def __init__(self, control_points, degrees=(3, 3), knot_vectors=None, weights=None, *, validate: bool = True):
         super().__init__(control_points, degrees, knot_vectors, weights, validate=validate)
 
-    def _upper_edges(self, u: Tensor, v: Tensor) -> tuple[Tensor, Tensor]:
-        """Whether ``u``, ``v`` sit on the upper domain ends (``(...)`` booleans, on the device)."""
-        nb = len(self.batch_shape)
-        (ku, kv), (p, q), (nu, nv) = self.knot_vectors, self.degrees, self.sizes
+    def _upper_edges(self, u: Tensor, v: Tensor, point_dims: int) -> tuple[Tensor, Tensor]:
+        """Whether ``u``, ``v`` sit on the upper domain ends: ``(*, ...)`` booleans on the device,
+        where the last ``point_dims`` axes of ``u`` and ``v`` index points and any before
+        them the batch."""
+        (ku, kv), (nu, nv) = self.knot_vectors, self.sizes
 
         def end(k, n, x):
             e = k.detach()[..., n]
-            return x >= (e if e.ndim == 0 else e.reshape(e.shape + (1,) * (x.ndim - nb)))
+            return x >= e.reshape(e.shape + (1,) * point_dims)
 
         return end(ku, nu, u), end(kv, nv, v)
 
@@ -95,14 +96,12 @@ class NURBSSurface(TensorSpline):
         """
         t = self._params(params)
         d = self.derivatives(t, order=1, extrapolate=extrapolate)
-        at_u, at_v = self._upper_edges(t[..., 0].expand(d.shape[:-3]), t[..., 1].expand(d.shape[:-3]))
+        at_u, at_v = self._upper_edges(t[..., 0], t[..., 1], 1)
         return _unit(limit_normals(d[..., 1, 0, :], d[..., 0, 1, :], d[..., 1, 1, :], at_u, at_v))
 
     def normals_grid(self, u, v, *, extrapolate: bool = False) -> Tensor:
         """Unit normals on a grid: ``(*B, R, S, 3)`` (limit normals at poles, as :meth:`normals`)."""
         d = self.evaluate_grid(u, v, order=1, extrapolate=extrapolate)
         u, v = [torch.as_tensor(x, dtype=self.dtype, device=self.device) for x in (u, v)]
-        at_u, at_v = self._upper_edges(u.reshape(u.shape[:-1] + (-1, 1)), v.reshape(v.shape[:-1] + (1, -1)))
-        shape = d.shape[:-3]
-        return _unit(limit_normals(d[..., 1, 0, :], d[..., 0, 1, :], d[..., 1, 1, :],
-                                   at_u.expand(shape), at_v.expand(shape)))
+        at_u, at_v = self._upper_edges(u.reshape(u.shape[:-1] + (-1, 1)), v.reshape(v.shape[:-1] + (1, -1)), 2)
+        return _unit(limit_normals(d[..., 1, 0, :], d[..., 0, 1, :], d[..., 1, 1, :], at_u, at_v))
