@@ -394,9 +394,11 @@ def test_cuda_matches_cpu_and_reads_nothing_back():
     b = random_batch(NURBSSurface, rng, (4,), (3, 3), (8, 7), per_element_knots=True, domains=[(0.0, 1.0)] * 2)
     g = b.to("cuda")
     uv = _params(b, rng, 50, (4,))
-    assert_close(g.evaluate(uv.cuda()).cpu(), b.evaluate(uv), atol=1e-12)
-    assert_close(g.derivatives(uv.cuda(), order=2).cpu(), b.derivatives(uv, order=2), atol=1e-10)
-    assert_close(g.sample(33).cpu(), b.sample(33), atol=1e-12)
+    for got, expected in ((g.evaluate(uv.cuda()), b.evaluate(uv)),
+                          (g.derivatives(uv.cuda(), order=2), b.derivatives(uv, order=2)),
+                          (g.sample(33), b.sample(33)), (g.sample(9, order=1), b.sample(9, order=1))):
+        # float64 on both devices; the derivatives grow with the knot spacing, hence a relative scale
+        assert_close(got.cpu(), expected, atol=1e-12 * max(1.0, float(expected.abs().max())))
     s = _surface(device="cuda", validate=False)
     s.sample(256)
     with OperationCounter() as count:

@@ -459,21 +459,95 @@ def _grid_products(Pw: Tensor, ops: Sequence[Tensor], k: int, kron: bool) -> Ten
     return X.reshape(B + tuple(R) + (D,))
 
 
+class _SurfaceGrid(torch.autograd.Function):
+    """A rational surface on a grid through fixed basis operators, with a hand-written backward.
+
+    ``cp (n_u, *mid, n_v, dim)``, ``w (n_u, *mid, n_v)``, ``Bu (R, n_u)``, ``K = B_v^T kron I_D``
+    ``(n_v D, S D)`` -> ``(R, *mid, S, dim)``; ``mid`` is ``()`` or a batch axis ridden along.
+    Forward: ``Pw = (w P, w)``, two GEMMs and a division. Backward (one autograd node
+    instead of a dozen, which on a GPU is what a small grid's backward costs): with
+    ``out = num / den``, ``dnum = G / den``, ``dden = -sum(G out) / den``, then the two GEMMs
+    transposed and the product rule of ``(w P, w)``. Gradients reach ``cp`` and ``w`` only
+    (the operators come from the basis cache, which holds no gradients), once.
+    """
+
+    @staticmethod
+    def forward(ctx, cp, w, Bu, K):
+        w1 = w.unsqueeze(-1)
+        Pw = torch.cat([cp * w1, w1], dim=-1)
+        D = Pw.shape[-1]
+        X = Pw.reshape(-1, K.shape[0]).mm(K)  # (n_u * mid * 1, S D): contracts v, channels stay last
+        H = Bu.mm(X.reshape(Bu.shape[1], -1))  # (R, mid * S * D): contracts u
+        H = H.view((Bu.shape[0],) + cp.shape[1:-2] + (K.shape[1] // D, D))
+        num, den = H.split([D - 1, 1], dim=-1)
+        out = num / den
+        ctx.save_for_backward(cp, w, Bu, K, out, den)
+        return out
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, G):
+        cp, w, Bu, K, out, den = ctx.saved_tensors
+        gnum = G / den
+        gden = (gnum * out).sum(-1, keepdim=True).neg_()
+        dH = torch.cat([gnum, gden], dim=-1).reshape(Bu.shape[0], -1)
+        dX = Bu.t().mm(dH)  # (n_u, mid * S * D)
+        dPw = dX.reshape(-1, K.shape[1]).mm(K.t()).reshape(cp.shape[:-1] + (cp.shape[-1] + 1,))
+        gP, gw = dPw.split([cp.shape[-1], 1], dim=-1)
+        dcp = gP * w.unsqueeze(-1) if ctx.needs_input_grad[0] else None
+        dw = (gP * cp).sum(-1) + gw.squeeze(-1) if ctx.needs_input_grad[1] else None
+        return dcp, dw, None, None
+
+
+def _folded_products(Pw: Tensor, ops: Sequence[Tensor], sizes: Sequence[int], folded: bool) -> Tensor:
+    """Shared operators on ``Pw (n_1, [Bt,] n_2..n_k, D)`` (the batch, if any, behind the first
+    direction, so that every direction is one GEMM over the whole batch) ->
+    ``(R_1, [Bt,] R_2..R_k, D)``; ``ops[-1]`` is ``B_k^T kron I_D``."""
+    k = len(sizes)
+    D = Pw.shape[-1]
+    X = Pw.reshape(-1, sizes[-1] * D).mm(ops[-1])
+    R = [0] * k
+    R[-1] = ops[-1].shape[-1] // D
+    lead = Pw.shape[: 2 if folded else 1]
+    for a in range(k - 2, 0, -1):
+        P = math.prod(lead) * math.prod(sizes[1:a])
+        X = torch.matmul(ops[a], X.reshape(P, sizes[a], -1))
+        R[a] = ops[a].shape[0]
+    X = ops[0].mm(X.reshape(sizes[0], -1))
+    R[0] = ops[0].shape[0]
+    return X.reshape((R[0],) + tuple(lead[1:]) + tuple(R[1:]) + (D,))
+
+
 def _grid(control_points, weights, knot_vectors, degrees, axes, order: int) -> Tensor:
     k = len(degrees)
-    Pw = homogeneous(control_points, weights)
-    B = batch_shape(Pw, k)
-    sizes = tuple(Pw.shape[len(B) : len(B) + k])
-    D = Pw.shape[-1]
+    B = batch_shape(control_points, k)
+    nb = len(B)
+    sizes = tuple(control_points.shape[nb : nb + k])
+    D = control_points.shape[-1] + 1
     ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D)
-    h = _grid_products(Pw, ops, k, D <= _KRON_MAX_CHANNELS)
+    kron = D <= _KRON_MAX_CHANNELS
+    if kron and k >= 2 and all(op.ndim == 2 for op in ops):
+        # Shared operators: the batch rides behind the first direction (a cheap permuted
+        # copy of the control net), and every direction is one GEMM for the whole batch.
+        Bt = math.prod(B)
+        cp, w = control_points, weights
+        if B:
+            cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
+            w = w.reshape((Bt,) + sizes).movedim(0, 1)
+        if k == 2 and order == 0 and not any(op.requires_grad for op in ops):
+            out = _SurfaceGrid.apply(cp, w, ops[0], ops[1])  # (R, [Bt,] S, dim)
+            return out.movedim(1, 0).reshape(B + out.shape[:1] + out.shape[2:]) if B else out
+        h = _folded_products(homogeneous(cp, w), ops, sizes, bool(B))
+        if B:
+            h = h.movedim(1, 0).reshape(B + h.shape[:1] + h.shape[2:])
+    else:
+        h = _grid_products(homogeneous(control_points, weights), ops, k, kron)
     if order == 0:
         num, den = h.split([D - 1, 1], dim=-1)
         return num / den
     # (*B, (o+1) R_1, ..., (o+1) R_k, D) -> (*B, R_1..R_k, o..o, D)
-    lengths = h.shape[len(B) : len(B) + k]
+    lengths = h.shape[nb : nb + k]
     h = h.reshape(B + sum(((order + 1, r // (order + 1)) for r in lengths), ()) + (D,))
-    nb = len(B)
     perm = list(range(nb)) + [nb + 2 * a + 1 for a in range(k)] + [nb + 2 * a for a in range(k)] + [nb + 2 * k]
     return homogeneous_derivatives_to_points(h.permute(perm), k)
 
