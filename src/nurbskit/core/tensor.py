@@ -399,8 +399,9 @@ def _grid_matrix(kv: Tensor, p: int, n: int, axis: Tensor | int, order: int) -> 
     return m
 
 
-def _grid_operators(knot_vectors, degrees, sizes, axes, order: int, D: int) -> list[Tensor]:
-    """The per-direction operators of a grid: basis matrices, the last one as ``B^T kron I_D``.
+def _grid_operators(knot_vectors, degrees, sizes, axes, order: int, D: int, channel_rows: bool = False) -> list[Tensor]:
+    """The per-direction operators of a grid: basis matrices, the last one as ``B^T kron I_D``
+    (or, with ``channel_rows``, ``I_D kron B^T`` for a net laid out ``(..., D, n_k)``).
 
     Cached on (knots, axis tensor) or (knots, sample count) when nothing needs gradients.
     """
@@ -409,11 +410,18 @@ def _grid_operators(knot_vectors, degrees, sizes, axes, order: int, D: int) -> l
     for a in range(k):
         last = a == k - 1 and D <= _KRON_MAX_CHANNELS
         key_tensors = [knot_vectors[a]] + ([] if isinstance(axes[a], int) else [axes[a]])
-        extra = ("grid", degrees[a], sizes[a], order, axes[a] if isinstance(axes[a], int) else -1, D if last else 0)
+        extra = ("grid", degrees[a], sizes[a], order, axes[a] if isinstance(axes[a], int) else -1,
+                 D if last else 0, channel_rows and last)
 
         def build(a=a, last=last):
             m = _grid_matrix(knot_vectors[a], degrees[a], sizes[a], axes[a], order)
-            return _kron_channels(m, D) if last else m
+            if not last:
+                return m
+            if channel_rows:
+                eye = torch.eye(D, dtype=m.dtype, device=m.device)
+                BT = m.transpose(-1, -2)  # (n, R); K[(c, j), (c', s)] = [c == c'] B[s, j]
+                return (eye[:, None, :, None] * BT[None, :, None, :]).reshape(D * BT.shape[0], D * BT.shape[1])
+            return _kron_channels(m, D)
 
         ops.append(basis_cache.get(key_tensors, extra, build))
     return ops
@@ -462,40 +470,44 @@ def _grid_products(Pw: Tensor, ops: Sequence[Tensor], k: int, kron: bool) -> Ten
 class _SurfaceGrid(torch.autograd.Function):
     """A rational surface on a grid through fixed basis operators, with a hand-written backward.
 
-    ``cp (n_u, *mid, n_v, dim)``, ``w (n_u, *mid, n_v)``, ``Bu (R, n_u)``, ``K = B_v^T kron I_D``
-    ``(n_v D, S D)`` -> ``(R, *mid, S, dim)``; ``mid`` is ``()`` or a batch axis ridden along.
-    Forward: ``Pw = (w P, w)``, two GEMMs and a division. Backward (one autograd node
-    instead of a dozen, which on a GPU is what a small grid's backward costs): with
-    ``out = num / den``, ``dnum = G / den``, ``dden = -sum(G out) / den``, then the two GEMMs
-    transposed and the product rule of ``(w P, w)``. Gradients reach ``cp`` and ``w`` only
-    (the operators come from the basis cache, which holds no gradients), once.
+    ``cp (n_u, *mid, n_v, dim)``, ``w (n_u, *mid, n_v)``, ``Bu (R, n_u)``, ``K = I_D kron B_v^T``
+    ``(D n_v, D S)`` -> ``(R, *mid, S, dim)``; ``mid`` is ``()`` or a batch axis ridden along.
+    Forward: ``Pw = (w P, w)`` laid out ``(n_u, *mid, D, n_v)``, two GEMMs, and a division
+    of whole channel rows (contiguous, so it vectorises; the result is returned as a
+    transposed view, channel last). Backward (one autograd node instead of a dozen, which
+    is what a small grid's backward costs on a GPU): with ``out = num / den``,
+    ``dnum = G / den``, ``dden = -sum(G out) / den``, the two GEMMs transposed, and the
+    product rule of ``(w P, w)``. Gradients reach ``cp`` and ``w`` only (the operators come
+    from the basis cache, which holds no gradients), once.
     """
 
     @staticmethod
     def forward(ctx, cp, w, Bu, K):
-        w1 = w.unsqueeze(-1)
-        Pw = torch.cat([cp * w1, w1], dim=-1)
-        D = Pw.shape[-1]
-        X = Pw.reshape(-1, K.shape[0]).mm(K)  # (n_u * mid * 1, S D): contracts v, channels stay last
-        H = Bu.mm(X.reshape(Bu.shape[1], -1))  # (R, mid * S * D): contracts u
-        H = H.view((Bu.shape[0],) + cp.shape[1:-2] + (K.shape[1] // D, D))
-        num, den = H.split([D - 1, 1], dim=-1)
-        out = num / den
+        wT = w.unsqueeze(-2)
+        Pw = torch.cat([cp.transpose(-1, -2) * wT, wT], dim=-2)  # (n_u, *mid, D, n_v)
+        D = Pw.shape[-2]
+        X = Pw.reshape(-1, K.shape[0]).mm(K)  # (n_u * mid, D * S): contracts v
+        if X.shape[0] != Bu.shape[1]:
+            X = X.reshape(Bu.shape[1], -1)
+        H = Bu.mm(X)  # (R, mid * D * S): contracts u
+        H = H.view((Bu.shape[0],) + cp.shape[1:-2] + (D, K.shape[1] // D))
+        num, den = H.split([D - 1, 1], dim=-2)
+        out = num / den  # (R, *mid, dim, S)
         ctx.save_for_backward(cp, w, Bu, K, out, den)
-        return out
+        return out.transpose(-1, -2)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, G):
         cp, w, Bu, K, out, den = ctx.saved_tensors
-        gnum = G / den
-        gden = (gnum * out).sum(-1, keepdim=True).neg_()
-        dH = torch.cat([gnum, gden], dim=-1).reshape(Bu.shape[0], -1)
-        dX = Bu.t().mm(dH)  # (n_u, mid * S * D)
-        dPw = dX.reshape(-1, K.shape[1]).mm(K.t()).reshape(cp.shape[:-1] + (cp.shape[-1] + 1,))
-        gP, gw = dPw.split([cp.shape[-1], 1], dim=-1)
-        dcp = gP * w.unsqueeze(-1) if ctx.needs_input_grad[0] else None
-        dw = (gP * cp).sum(-1) + gw.squeeze(-1) if ctx.needs_input_grad[1] else None
+        gnum = G.transpose(-1, -2) / den  # (R, *mid, dim, S)
+        gden = (gnum * out).sum(-2, keepdim=True).neg_()
+        dH = torch.cat([gnum, gden], dim=-2).reshape(Bu.shape[0], -1)
+        dX = Bu.t().mm(dH)  # (n_u, mid * D * S)
+        dPw = dX.reshape(-1, K.shape[1]).mm(K.t()).reshape(cp.shape[:-2] + (cp.shape[-1] + 1, cp.shape[-2]))
+        gP, gw = dPw.split([cp.shape[-1], 1], dim=-2)  # (n_u, *mid, dim, n_v), (n_u, *mid, 1, n_v)
+        dcp = (gP * w.unsqueeze(-2)).transpose(-1, -2) if ctx.needs_input_grad[0] else None
+        dw = (gP * cp.transpose(-1, -2)).sum(-2) + gw.squeeze(-2) if ctx.needs_input_grad[1] else None
         return dcp, dw, None, None
 
 
@@ -524,8 +536,21 @@ def _grid(control_points, weights, knot_vectors, degrees, axes, order: int) -> T
     nb = len(B)
     sizes = tuple(control_points.shape[nb : nb + k])
     D = control_points.shape[-1] + 1
-    ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D)
     kron = D <= _KRON_MAX_CHANNELS
+    fixed = not any(kv.requires_grad for kv in knot_vectors) and not any(
+        isinstance(ax, Tensor) and ax.requires_grad for ax in axes)
+    per_element = _per_element(knot_vectors) or any(isinstance(ax, Tensor) and ax.ndim > 1 for ax in axes)
+    if kron and k == 2 and order == 0 and fixed and not per_element:
+        # The hot path of a fit: fixed basis, a surface, one node for autograd.
+        ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D, channel_rows=True)
+        cp, w = control_points, weights
+        if B:
+            Bt = math.prod(B)
+            cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
+            w = w.reshape((Bt,) + sizes).movedim(0, 1)
+        out = _SurfaceGrid.apply(cp, w, ops[0], ops[1])  # (R, [Bt,] S, dim)
+        return out.movedim(1, 0).reshape(B + out.shape[:1] + out.shape[2:]) if B else out
+    ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D)
     if kron and k >= 2 and all(op.ndim == 2 for op in ops):
         # Shared operators: the batch rides behind the first direction (a cheap permuted
         # copy of the control net), and every direction is one GEMM for the whole batch.
@@ -534,9 +559,6 @@ def _grid(control_points, weights, knot_vectors, degrees, axes, order: int) -> T
         if B:
             cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
             w = w.reshape((Bt,) + sizes).movedim(0, 1)
-        if k == 2 and order == 0 and not any(op.requires_grad for op in ops):
-            out = _SurfaceGrid.apply(cp, w, ops[0], ops[1])  # (R, [Bt,] S, dim)
-            return out.movedim(1, 0).reshape(B + out.shape[:1] + out.shape[2:]) if B else out
         h = _folded_products(homogeneous(cp, w), ops, sizes, bool(B))
         if B:
             h = h.movedim(1, 0).reshape(B + h.shape[:1] + h.shape[2:])
