@@ -24,7 +24,6 @@ never checks: its grid lies in the domain by construction.
 
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np

@@ -220,15 +220,11 @@ def _contract(block: Tensor, bases: Sequence[Tensor]) -> Tensor:
 
 
 def _span_basis(kv: Tensor, p: int, n: int, u: Tensor, order: int | None) -> tuple[Tensor, Tensor]:
-    """Spans ``(...)`` and basis values ``(..., o + 1, p + 1)`` at ``u`` (cached when possible)."""
-
-    def build():
-        s = find_spans(kv, p, n, u)
-        if order is None:
-            return s, basis_functions(kv, p, s, u).unsqueeze(-2)
-        return s, basis_function_derivatives(kv, p, s, u, order)
-
-    return build()
+    """Spans ``(...)`` and basis values ``(..., o + 1, p + 1)`` at ``u`` (``o = 0`` for ``order`` None)."""
+    s = find_spans(kv, p, n, u)
+    if order is None:
+        return s, basis_functions(kv, p, s, u).unsqueeze(-2)
+    return s, basis_function_derivatives(kv, p, s, u, order)
 
 
 def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None) -> Tensor:
@@ -247,6 +243,7 @@ def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], p
         # One set of parameters for every element: the basis is computed once, and the
         # batch rides along as extra channels of one contraction.
         flat = params.reshape(-1, k)
+
         def build():
             return [_span_basis(knot_vectors[a], degrees[a], sizes[a], flat[:, a], order) for a in range(k)]
         found = basis_cache.get([params, *knot_vectors], extra, build)
