@@ -1,19 +1,33 @@
-"""How fast is surface evaluation, with and without gradients, against geomdl and a naive loop?
+"""How fast is surface evaluation, alone and in batches, against NURBS-Diff, geomdl and loops?
 
-Question: degree-3 surfaces with 14 x 13 and 32 x 32 control points on 64^2, 256^2
-and 512^2 parameter grids, float32: forward, forward + backward to control points
-and weights, and forward + backward with knot gradients too. Peers in the same
-process: geomdl (pure Python, forward only) and a naive per-point loop (our own
-scattered evaluation called once per point). Both peers are timed on a subset of
-the points (every point of a 64^2 grid for geomdl, 1,024 points for the loop) and
-reported per point; the ratio compares per-point costs.
+Question: degree-3 rational surfaces with 14 x 13 and 32 x 32 control points on 64^2,
+256^2 and 512^2 parameter grids (2048^2 added on a GPU), float32: forward with fixed
+knots (the basis comes from the cache after the first call; the surface unchecked, as
+inside a loop), forward + backward to
+control points and weights, and forward + backward with knot gradients too (the basis
+is then rebuilt, vectorised over the degree, on every call). And a batch: 64 surfaces of
+16 x 16 control points on 128^2 grids, forward and forward + backward, as one batched
+call against a Python loop over the 64 surfaces.
 
-Usage: python benchmarks/bench_core_eval.py [--quick] [--device cuda]
+Peers in the same process:
+
+* NURBS-Diff v2 (``../shared/peers/nurbsdiff_v2``, its ``SurfEval`` layer with the
+  basis precomputed for its own grid; skipped with the reason when the folder or
+  ``einops`` is missing). Its samples run from 1e-8 to 1 - 1e-8; we report its time,
+  the number of NaN it returns and its largest error against our float64 evaluation
+  at its own parameters, never use it as an oracle.
+* geomdl (pure Python, forward only, CPU) on every point of a 64^2 grid, per point.
+* a naive loop (our own scattered evaluation called once per point), per point.
+* a floor: the two dense matrix products a grid needs at least,
+  ``(R x n)(n x n D)`` and ``(R D x n)(n x R)`` on precomputed operands.
+
+Usage: python benchmarks/bench_core_eval.py [--quick] [--device cpu|cuda] [--peer PATH]
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
 
@@ -24,17 +38,78 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import timeit, write_results  # noqa: E402
 
 from nurbskit import NURBSSurface  # noqa: E402
-from nurbskit.core import clamped_uniform, to_geomdl  # noqa: E402
+from nurbskit.core import to_geomdl  # noqa: E402
+
+DEFAULT_PEER = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "nurbsdiff_v2"
 
 
-def make_surface(n_u: int, n_v: int, device: str) -> NURBSSurface:
-    rng = np.random.default_rng(0)
-    cp = torch.tensor(rng.normal(size=(n_u, n_v, 3)), dtype=torch.float32, device=device)
-    w = torch.tensor(rng.uniform(0.5, 1.5, size=(n_u, n_v)), dtype=torch.float32, device=device)
+def load_peer(path: Path):
+    """NURBS-Diff's ``SurfEval`` class, or ``(None, reason)``."""
+    if not path.is_dir():
+        return None, f"peer folder {path} not found"
+    sys.path.insert(0, str(path))
+    try:
+        module = importlib.import_module("NURBSDiff.surf_eval")
+    except ImportError as exc:
+        return None, f"NURBS-Diff could not be imported ({exc})"
+    return module.SurfEval, ""
+
+
+def make_surface(n_u: int, n_v: int, device: str, batch=(), seed: int = 0) -> NURBSSurface:
+    rng = np.random.default_rng(seed)
+    cp = torch.tensor(rng.normal(size=tuple(batch) + (n_u, n_v, 3)), dtype=torch.float32, device=device)
+    w = torch.tensor(rng.uniform(0.5, 1.5, size=tuple(batch) + (n_u, n_v)), dtype=torch.float32, device=device)
     return NURBSSurface(cp, (3, 3), weights=w)
 
 
-def run(quick: bool, device: str) -> list[dict]:
+def homogeneous(s: NURBSSurface) -> torch.Tensor:
+    w = s.weights.unsqueeze(-1)
+    return torch.cat([s.control_points * w, w], dim=-1)
+
+
+def floor_time(n: int, r: int, device: str, sync) -> float:
+    """Two dense GEMMs of a grid on precomputed operands: the arithmetic floor."""
+    g = torch.Generator(device=device).manual_seed(0)
+    Bu = torch.rand(r, n, device=device, generator=g)
+    P = torch.rand(n, n * 4, device=device, generator=g)
+    Y = torch.rand(r * 4, n, device=device, generator=g)
+    BvT = torch.rand(n, r, device=device, generator=g)
+
+    def two():
+        Bu.mm(P)
+        Y.mm(BvT)
+
+    return timeit(two, repeats=9, min_time=0.05, sync=sync)
+
+
+def peer_rows(SurfEval, base: NURBSSurface, r: int, device: str, sync, reps: int) -> dict:
+    n_u, n_v = base.sizes
+    layer = SurfEval(n_u - 1, n_v - 1, dimension=3, p=3, q=3, out_dim_u=r, out_dim_v=r, device=device)
+    Pw = homogeneous(base).unsqueeze(0).contiguous()
+    with torch.no_grad():
+        out = layer(Pw)[0]
+    # our float64 evaluation at the peer's own parameters
+    ref = base.to(torch.float64).evaluate_grid(layer.u.double(), layer.v.double())
+    nan = int(torch.isnan(out).sum())
+    finite = torch.isfinite(out)
+    err = float((out.double() - ref).abs()[finite].max()) if bool(finite.any()) else float("nan")
+    Pg = Pw.clone().requires_grad_()
+
+    def forward():
+        with torch.no_grad():
+            layer(Pw)
+
+    def fwd_bwd():
+        Pg.grad = None
+        layer(Pg).square().sum().backward()
+
+    t_f = timeit(forward, repeats=reps, min_time=0.05, sync=sync)
+    t_fb = timeit(fwd_bwd, repeats=reps, min_time=0.05, sync=sync)
+    return {"nurbsdiff_forward_ms": t_f * 1e3, "nurbsdiff_fwd_bwd_ms": t_fb * 1e3,
+            "nurbsdiff_nan": nan, "nurbsdiff_max_err": err, "nurbsdiff_outputs": int(out.numel())}
+
+
+def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict]:
     sync = torch.cuda.synchronize if device.startswith("cuda") else None
     sizes = [(14, 13), (32, 32)]
     grids = [64, 256] if quick else [64, 256, 512]
@@ -43,48 +118,49 @@ def run(quick: bool, device: str) -> list[dict]:
     rows = []
     for n_u, n_v in sizes:
         base = make_surface(n_u, n_v, device)
-        # geomdl, per point, on a 64^2 grid (same surface in float64: geomdl has no float32)
-        geomdl_per_point = None
+        geomdl_per_point = err = None
         if not device.startswith("cuda"):
             g = to_geomdl(base.to(torch.float64))
-            pts = [[float(a), float(b)] for a in np.linspace(0, 1, 32 if quick else 64) for b in np.linspace(0, 1, 32 if quick else 64)]
+            side = 32 if quick else 64
+            pts = [[float(a), float(b)] for a in np.linspace(0, 1, side) for b in np.linspace(0, 1, side)]
             geomdl_per_point = timeit(lambda: g.evaluate_list(pts), repeats=1 if quick else 3, warmup=0) / len(pts)
-            # check agreement on those points while we are here
             ours = base.to(torch.float64).evaluate(torch.tensor(pts, dtype=torch.float64)).numpy()
             err = float(np.abs(np.asarray(g.evaluate_list(pts)) - ours).max())
-        else:
-            err = None
-        # naive loop: one scattered evaluation per point
         loop_pts = torch.rand(256 if quick else 1024, 2, device=device)
-        loop_per_point = timeit(lambda: [base.evaluate(p[None]) for p in loop_pts], repeats=3, warmup=1, sync=sync) / len(loop_pts)
+        loop_per_point = timeit(lambda: [base.evaluate(p[None]) for p in loop_pts], repeats=3, warmup=1,
+                                sync=sync) / len(loop_pts)
+        # Inside a loop (a fit, a network) splines are unchecked: validate=False, or derived
+        # with _replace; a validated object adds one host read per call for the domain check.
+        unchecked = base._replace()
         for r in grids:
             u = torch.linspace(0, 1, r, device=device)
             n_points = r * r
 
             def forward():
                 with torch.no_grad():
-                    base.evaluate_grid(u, u)
+                    unchecked.evaluate_grid(u, u)
 
             cp = base.control_points.clone().requires_grad_()
             w = base.weights.clone().requires_grad_()
             kv = [k.clone().requires_grad_() for k in base.knot_vectors]
 
             def fwd_bwd():
-                s = base._replace(control_points=cp, weights=w)
-                s.evaluate_grid(u, u).square().sum().backward()
+                cp.grad = w.grad = None
+                base._replace(control_points=cp, weights=w).evaluate_grid(u, u).square().sum().backward()
 
             def fwd_bwd_knots():
-                s = base._replace(control_points=cp, weights=w, knot_vectors=kv)
-                s.evaluate_grid(u, u).square().sum().backward()
+                cp.grad = w.grad = None
+                base._replace(control_points=cp, weights=w, knot_vectors=kv).evaluate_grid(u, u).square().sum().backward()
 
             reps = 5 if quick else 15
             t_f = timeit(forward, repeats=reps, min_time=0.05, sync=sync)
             t_fb = timeit(fwd_bwd, repeats=reps, min_time=0.05, sync=sync)
-            t_fbk = timeit(fwd_bwd_knots, repeats=reps, min_time=0.05, sync=sync)
+            t_fbk = timeit(fwd_bwd_knots, repeats=reps if r < 2048 else 3, min_time=0.05, sync=sync)
+            t_floor = floor_time(max(n_u, n_v), r, device, sync)
             row = {
                 "control": f"{n_u}x{n_v}", "grid": f"{r}^2", "points": n_points,
                 "forward_ms": t_f * 1e3, "fwd_bwd_ms": t_fb * 1e3, "fwd_bwd_knots_ms": t_fbk * 1e3,
-                "points_per_s": n_points / t_f,
+                "points_per_s": n_points / t_f, "floor_ms": t_floor * 1e3, "x_floor": t_f / t_floor,
                 "naive_loop_ms_est": loop_per_point * n_points * 1e3,
                 "speedup_vs_naive_loop": loop_per_point * n_points / t_f,
             }
@@ -92,29 +168,111 @@ def run(quick: bool, device: str) -> list[dict]:
                 row["geomdl_ms_est"] = geomdl_per_point * n_points * 1e3
                 row["speedup_vs_geomdl"] = geomdl_per_point * n_points / t_f
                 row["max_abs_diff_vs_geomdl_f64"] = err
+            if SurfEval is not None and (n_u, n_v) == (32, 32):
+                row.update(peer_rows(SurfEval, base, r, device, sync, reps))
+                row["x_nurbsdiff_fwd_bwd"] = row["nurbsdiff_fwd_bwd_ms"] / row["fwd_bwd_ms"]
+                row["x_nurbsdiff_forward"] = row["nurbsdiff_forward_ms"] / row["forward_ms"]
+            elif SurfEval is None:
+                row["nurbsdiff"] = f"skipped: {peer_reason}"
             rows.append(row)
             print(row, flush=True)
     return rows
 
 
+def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
+    """64 surfaces of 16 x 16 at 128^2: one batched call against a loop over the surfaces."""
+    sync = torch.cuda.synchronize if device.startswith("cuda") else None
+    count, r = 64, 128
+    batch = make_surface(16, 16, device, batch=(count,), seed=1)
+    cp = batch.control_points.clone().requires_grad_()
+    w = batch.weights.clone().requires_grad_()
+    singles = [batch[i] for i in range(count)]
+    reps = 3 if quick else 7
+
+    def batched_forward():
+        with torch.no_grad():
+            batch.sample(r)
+
+    def looped_forward():
+        with torch.no_grad():
+            for s in singles:
+                s.sample(r)
+
+    def batched_fwd_bwd():
+        cp.grad = w.grad = None
+        batch._replace(control_points=cp, weights=w).sample(r).square().sum().backward()
+
+    def looped_fwd_bwd():
+        cp.grad = w.grad = None
+        total = 0
+        for i, s in enumerate(singles):
+            total = total + s._replace(control_points=cp[i], weights=w[i]).sample(r).square().sum()
+        total.backward()
+
+    # the batch equals the loop (same float32 arithmetic, another order)
+    with torch.no_grad():
+        diff = float((batch.sample(r) - torch.stack([s.sample(r) for s in singles])).abs().max())
+    row = {"surfaces": count, "control": "16x16", "grid": f"{r}^2",
+           "batched_forward_ms": timeit(batched_forward, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "looped_forward_ms": timeit(looped_forward, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "batched_fwd_bwd_ms": timeit(batched_fwd_bwd, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "looped_fwd_bwd_ms": timeit(looped_fwd_bwd, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "max_abs_diff_batch_vs_loop": diff}
+    row["x_loop_forward"] = row["looped_forward_ms"] / row["batched_forward_ms"]
+    row["x_loop_fwd_bwd"] = row["looped_fwd_bwd_ms"] / row["batched_fwd_bwd_ms"]
+    if SurfEval is not None:
+        layer = SurfEval(15, 15, dimension=3, p=3, q=3, out_dim_u=r, out_dim_v=r, device=device)
+        Pg = homogeneous(batch).detach().clone().requires_grad_()
+
+        def peer_fwd_bwd():
+            Pg.grad = None
+            layer(Pg).square().sum().backward()
+
+        row["nurbsdiff_fwd_bwd_ms"] = timeit(peer_fwd_bwd, repeats=reps, min_time=0.05, sync=sync) * 1e3
+    print(row, flush=True)
+    return [row]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--peer", type=Path, default=DEFAULT_PEER, help="folder holding NURBSDiff (NURBS-Diff v2)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    rows = run(args.quick, args.device)
+    SurfEval, reason = load_peer(args.peer)
+    if SurfEval is None:
+        print(f"NURBS-Diff skipped: {reason}", flush=True)
+    rows = run_grids(args.quick, args.device, SurfEval, reason)
+    batch_rows = run_batch(args.quick, args.device, SurfEval)
+    subdir = "gpu" if args.device == "cuda" else ""
+    suffix = "_quick" if args.quick else ""
+    meta = {"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3,
+            "nurbsdiff": "ok" if SurfEval is not None else f"skipped: {reason}"}
     columns = [("control", "control"), ("grid", "grid"), ("forward_ms", "forward ms"),
                ("fwd_bwd_ms", "fwd+bwd ms (P, w)"), ("fwd_bwd_knots_ms", "fwd+bwd ms (P, w, knots)"),
-               ("points_per_s", "points/s (forward)"), ("speedup_vs_geomdl", "x geomdl"),
+               ("points_per_s", "points/s (forward)"), ("x_floor", "forward / 2-GEMM floor"),
+               ("nurbsdiff_forward_ms", "NURBS-Diff fwd ms"), ("nurbsdiff_fwd_bwd_ms", "NURBS-Diff fwd+bwd ms"),
+               ("x_nurbsdiff_fwd_bwd", "x NURBS-Diff (fwd+bwd)"), ("nurbsdiff_nan", "NURBS-Diff NaN"),
+               ("nurbsdiff_max_err", "NURBS-Diff max err"), ("speedup_vs_geomdl", "x geomdl"),
                ("speedup_vs_naive_loop", "x naive loop")]
-    subdir = "gpu" if args.device.startswith("cuda") else ""
-    write_results("core_eval" + ("_quick" if args.quick else ""), rows, columns,
-                  meta={"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3},
+    write_results("core_eval" + suffix, rows, columns, meta=meta,
                   title="Surface evaluation: forward and backward, degree 3, float32", subdir=subdir,
-                  notes="Median of repeats after warm-up. geomdl and the naive loop run on a subset of "
-                        "points in the same process; their totals are per-point cost x points.")
+                  notes="Median of repeats after warm-up. Forward with fixed knots uses the cached basis. "
+                        "NURBS-Diff v2 runs in the same process on its own grid (1e-8 inside the ends); its "
+                        "error is against our float64 evaluation at its parameters. geomdl and the naive loop "
+                        "run on a subset of points; their totals are per-point cost x points.")
+    write_results("core_batch" + suffix, batch_rows,
+                  [("surfaces", "surfaces"), ("control", "control"), ("grid", "grid"),
+                   ("batched_forward_ms", "batched fwd ms"), ("looped_forward_ms", "looped fwd ms"),
+                   ("x_loop_forward", "x loop (fwd)"), ("batched_fwd_bwd_ms", "batched fwd+bwd ms"),
+                   ("looped_fwd_bwd_ms", "looped fwd+bwd ms"), ("x_loop_fwd_bwd", "x loop (fwd+bwd)"),
+                   ("nurbsdiff_fwd_bwd_ms", "NURBS-Diff fwd+bwd ms"),
+                   ("max_abs_diff_batch_vs_loop", "max |batch - loop|")],
+                  meta=meta, title="A batch of 64 surfaces against a loop, float32", subdir=subdir,
+                  notes="One NURBSSurface with control points (64, 16, 16, 3) sampled on 128^2, against a "
+                        "Python loop over the 64 single surfaces; forward + backward to control points and weights.")
 
 
 if __name__ == "__main__":

@@ -52,3 +52,37 @@ def to_geomdl_params(spline, params: torch.Tensor) -> np.ndarray:
     hi = np.array([float(kv[-1]) for kv in spline.knot_vectors])
     t = (params.reshape(-1, len(lo)).numpy() - lo) / (hi - lo)
     return np.clip(t, 0.0, 1.0), hi - lo
+
+
+def random_batch(cls, rng: np.random.Generator, batch, degrees, sizes, dim=3, per_element_knots=False,
+                 dtype=torch.float64, domains=None):
+    """A batch ``batch`` of random rational splines; knots shared or one vector per element."""
+    n_el = int(np.prod(batch))
+    domains = domains or [random_domain(rng) for _ in degrees]
+    kvs = []
+    for n, p, d in zip(sizes, degrees, domains):
+        if per_element_knots:
+            rows = [random_knots(rng, n, p, d) for _ in range(n_el)]
+            kvs.append(torch.tensor(np.array(rows), dtype=dtype).reshape(tuple(batch) + (-1,)))
+        else:
+            kvs.append(torch.tensor(random_knots(rng, n, p, d), dtype=dtype))
+    cp = torch.tensor(rng.normal(size=tuple(batch) + tuple(sizes) + (dim,)), dtype=dtype)
+    w = torch.tensor(rng.uniform(0.3, 2.0, size=tuple(batch) + tuple(sizes)), dtype=dtype)
+    if len(degrees) == 1:
+        return cls(cp, degrees[0], kvs[0], w)
+    return cls(cp, degrees, kvs, w)
+
+
+def sphere_octant(dtype=torch.float64):
+    """Unit sphere, x, y, z >= 0, as a rational biquadratic: u the longitude (0 at +x), v the
+    latitude (1 at the pole, where the whole edge v = 1 collapses to (0, 0, 1))."""
+    from nurbskit import NURBSSurface
+
+    arc = torch.tensor([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=dtype)
+    arc_w = torch.tensor([1.0, 2 ** -0.5, 1.0], dtype=dtype)
+    cp = torch.empty(3, 3, 3, dtype=dtype)
+    for i in range(3):
+        for j in range(3):
+            r, z = arc[j]
+            cp[i, j] = torch.stack([r * arc[i, 0], r * arc[i, 1], z])
+    return NURBSSurface(cp, degrees=(2, 2), weights=arc_w[:, None] * arc_w[None, :])

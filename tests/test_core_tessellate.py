@@ -12,6 +12,7 @@ import torch
 from nurbskit import NURBSCurve, NURBSSurface, NurbskitError
 from nurbskit.core.tessellate import grid_faces, tessellate, tessellate_adaptive
 
+from _assert import assert_close
 from test_core_project import F64, RADIUS, cylinder_quarter, smooth_height_field, sphere_octant
 
 
@@ -31,8 +32,8 @@ def test_vertices_are_surface_points_and_layout():
     vertices, faces, normals = tessellate(s, (R, S))
     assert vertices.shape == (R * S, 3) and normals.shape == (R * S, 3)
     assert faces.shape == (2 * (R - 1) * (S - 1), 3) and faces.dtype == torch.int64
-    assert torch.allclose(vertices, s.evaluate(_grid_params(s, R, S)), rtol=0, atol=1e-13)
-    assert torch.allclose(normals, s.normals(_grid_params(s, R, S)), rtol=0, atol=1e-12)
+    assert_close(vertices, s.evaluate(_grid_params(s, R, S)), rtol=0, atol=1e-13)
+    assert_close(normals, s.normals(_grid_params(s, R, S)), rtol=0, atol=1e-12)
     assert faces.min() == 0 and faces.max() == R * S - 1
     assert torch.equal(torch.unique(faces), torch.arange(R * S))
     # every cell (i, j) is split along its diagonal (i, j) - (i+1, j+1), into faces 2k and 2k+1
@@ -53,11 +54,11 @@ def test_orientation_follows_su_x_sv():
 def test_sphere_normals_are_the_position_pole_included():
     s = sphere_octant()
     vertices, faces, normals = tessellate(s, (9, 7))
-    assert torch.allclose(vertices.norm(dim=-1), torch.ones(63, dtype=F64), atol=1e-14)
+    assert_close(vertices.norm(dim=-1), torch.ones(63, dtype=F64), atol=1e-14)
     # outward unit normal of the unit sphere = the point itself, also at the pole (v = 1 row)
-    assert torch.allclose(normals, vertices, rtol=0, atol=1e-12)
+    assert_close(normals, vertices, rtol=0, atol=1e-12)
     pole = torch.arange(6, 63, 7)
-    assert torch.allclose(normals[pole], torch.tensor([0.0, 0.0, 1.0], dtype=F64).expand(9, 3), atol=1e-12)
+    assert_close(normals[pole], torch.tensor([0.0, 0.0, 1.0], dtype=F64).expand(9, 3), atol=1e-12)
     fn = _face_normals(vertices, faces)
     area = fn.norm(dim=-1)
     regular = area > 1e-12
@@ -73,7 +74,7 @@ def test_collapsed_edge_in_each_parametric_position():
     flipped = NURBSSurface(s.control_points.flip(1), (2, 2), None, s.weights.flip(1))
     for surface in (swapped, flipped):
         vertices, _, normals = tessellate(surface, (7, 5))
-        assert torch.allclose(normals, -vertices, rtol=0, atol=1e-12)
+        assert_close(normals, -vertices, rtol=0, atol=1e-12)
 
 
 def test_face_average_where_the_limit_vanishes_too():
@@ -87,8 +88,8 @@ def test_face_average_where_the_limit_vanishes_too():
     s = NURBSSurface(cp, (2, 2))
     vertices, faces, normals = tessellate(s, (6, 5))
     expected = s.normals(torch.tensor([[0.5, 0.5]], dtype=F64))[0]  # a regular point
-    assert torch.allclose(expected.abs(), torch.tensor([0.0, 0.0, 1.0], dtype=F64))
-    assert torch.allclose(normals, expected.expand_as(normals), atol=1e-12)
+    assert_close(expected.abs(), torch.tensor([0.0, 0.0, 1.0], dtype=F64), atol=1e-12)
+    assert_close(normals, expected.expand_as(normals), atol=1e-12)
     assert torch.isfinite(normals).all()
 
 
@@ -97,8 +98,8 @@ def test_cylinder_normals_closed_form():
     vertices, faces, normals = tessellate(s, (10, 4))
     radial = vertices.clone()
     radial[:, 2] = 0
-    assert torch.allclose(radial.norm(dim=-1), torch.full((40,), RADIUS, dtype=F64), atol=1e-14)
-    assert torch.allclose(normals, radial / RADIUS, atol=1e-12)
+    assert_close(radial.norm(dim=-1), torch.full((40,), RADIUS, dtype=F64), atol=1e-14)
+    assert_close(normals, radial / RADIUS, atol=1e-12)
     theta = torch.atan2(vertices[:, 1], vertices[:, 0])
     assert theta.min() > -1e-15 and theta.max() < math.pi / 2 + 1e-15
 
@@ -129,8 +130,8 @@ def _edge_midpoints(vertices, faces):
 def test_adaptive_chords_within_tolerance_on_the_sphere(tolerance):
     s = sphere_octant()
     vertices, faces, normals = tessellate_adaptive(s, tolerance)
-    assert torch.allclose(vertices.norm(dim=-1), torch.ones(len(vertices), dtype=F64), atol=1e-14)
-    assert torch.allclose(normals, vertices, atol=1e-12)
+    assert_close(vertices.norm(dim=-1), torch.ones(len(vertices), dtype=F64), atol=1e-14)
+    assert_close(normals, vertices, atol=1e-12)
     # every triangle edge's midpoint lies inside the unit sphere within the tolerance
     gap = 1 - _edge_midpoints(vertices, faces).norm(dim=-1)
     assert gap.min() > -1e-14 and gap.max() <= tolerance

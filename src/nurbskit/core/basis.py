@@ -1,15 +1,25 @@
-"""B-spline basis functions and their derivatives, vectorised over parameters.
+"""B-spline basis functions and their derivatives, vectorised over parameters and degree.
 
-Both routines follow The NURBS Book (Piegl and Tiller): A2.2 for the ``p + 1``
-non-zero basis values on a span and A2.3 for their derivatives. They are written
-with tensor operations on the knots, so autograd differentiates the piecewise
-polynomial basis exactly with respect to the knots and the parameters; only the
-span search (piecewise constant) is done on detached values.
+The ``p + 1`` non-zero basis values on a span follow the triangular recurrence of
+The NURBS Book (Piegl and Tiller) A2.2, and their derivatives the difference formula
+behind A2.3 (eq. 2.9): ``N'_{i,q} = q (N_{i,q-1} / (u_{i+q} - u_i) - N_{i+1,q-1} / (u_{i+q+1} - u_{i+1}))``.
+Both are written level by level on whole vectors (``(..., q + 1)`` at level ``q``), so a
+degree-``p`` basis is about ``8 p`` tensor operations however many parameters there
+are, and autograd differentiates the piecewise polynomial basis exactly with respect
+to the knots and the parameters; only the span search (piecewise constant) is done on
+detached values.
+
+Convention: knots are ``(m,)`` (shared) or ``(*B, m)`` (one vector per batch element,
+with ``spans`` and ``u`` of shape ``(*B, ...)``). On a non-empty span every denominator
+``knots[span + 1 + r] - knots[span + 1 + r - q]`` contains the span itself, so it is
+positive: nothing is divided by zero, and :func:`nurbskit.core.knots.knot_tolerance`
+keeps spans from being too short to divide by.
 """
 
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 from .knots import find_spans
 
@@ -25,98 +35,96 @@ def _take(values: Tensor, index: Tensor) -> Tensor:
     return values.index_select(0, index.reshape(-1)).reshape(index.shape)
 
 
-def _knot_differences(knots: Tensor, degree: int, spans: Tensor, u: Tensor) -> tuple[list, list]:
-    """``left[j] = u - knots[span + 1 - j]`` and ``right[j] = knots[span + j] - u``, j = 1..p."""
-    left = [None] + [u - _take(knots, spans + 1 - j) for j in range(1, degree + 1)]
-    right = [None] + [_take(knots, spans + j) - u for j in range(1, degree + 1)]
-    return left, right
+def knot_window(knots: Tensor, degree: int, spans: Tensor) -> Tensor:
+    """``K[..., t] = knots[span - p + 1 + t]`` for ``t = 0 .. 2p - 1``: the knots a span's basis uses.
+
+    Shapes: ``knots (m,)`` with ``spans (...)``, or ``knots (*B, m)`` with ``spans (*B, ...)``
+    -> ``(..., 2p)``. ``K[p - 1]`` and ``K[p]`` are the span's own ends.
+    """
+    p = degree
+    index = spans.unsqueeze(-1) + torch.arange(1 - p, p + 1, device=spans.device)
+    if knots.ndim == 1:
+        return _take(knots, index)
+    lead = knots.shape[:-1]
+    flat = index.reshape(lead + (-1,))
+    return torch.gather(knots, -1, flat).reshape(index.shape)
+
+
+def _levels(K: Tensor, degree: int, u: Tensor) -> tuple[list[Tensor], list[Tensor]]:
+    """Basis values of every degree ``q = 0..p`` on the span, and the level denominators.
+
+    ``values[q] (..., q + 1)`` holds ``N[span - q + r, q](u)``; ``dens[q] (..., q)`` holds
+    ``knots[span + 1 + r] - knots[span + 1 + r - q]`` (A2.2's ``right[r+1] + left[q-r]``).
+    """
+    p = degree
+    u = u.unsqueeze(-1)
+    left = u - K[..., :p]  # left[t] = u - knots[span - p + 1 + t]
+    right = K[..., p:] - u  # right[r] = knots[span + 1 + r] - u
+    values = [torch.ones_like(u)]
+    dens: list[Tensor] = [u[..., :0]]
+    for q in range(1, p + 1):
+        R, L = right[..., :q], left[..., p - q :]
+        den = R + L
+        temp = values[-1] / den
+        values.append(F.pad(R * temp, (0, 1)) + F.pad(L * temp, (1, 0)))
+        dens.append(den)
+    return values, dens
 
 
 def basis_functions(knots: Tensor, degree: int, spans: Tensor, u: Tensor) -> Tensor:
     """Non-zero basis values ``N[span - p + j, p](u)``, j = 0..p (The NURBS Book A2.2).
 
-    Shapes: ``spans (...)``, ``u (...)`` -> ``(..., p + 1)``.
+    Shapes: ``spans (...)``, ``u (...)`` -> ``(..., p + 1)`` (knots as in the module docstring).
     """
-    left, right = _knot_differences(knots, degree, spans, u)
-    values = [torch.ones_like(u)]
-    for j in range(1, degree + 1):
-        saved = torch.zeros_like(u)
-        nxt = []
-        for r in range(j):
-            temp = values[r] / (right[r + 1] + left[j - r])
-            nxt.append(saved + right[r + 1] * temp)
-            saved = left[j - r] * temp
-        nxt.append(saved)
-        values = nxt
-    # Stacking on a new leading axis copies contiguous blocks; moving it last is a view.
-    return torch.stack(values).movedim(0, -1)
+    if degree == 0:
+        return torch.ones_like(u).unsqueeze(-1)
+    values, _ = _levels(knot_window(knots, degree, spans), degree, u)
+    return values[-1]
 
 
 def basis_function_derivatives(knots: Tensor, degree: int, spans: Tensor, u: Tensor, order: int) -> Tensor:
-    """Basis values and derivatives up to ``order`` on each span (The NURBS Book A2.3).
+    """Basis values and derivatives up to ``order`` on each span (The NURBS Book A2.3, eq. 2.9).
 
     Shapes: ``spans (...)``, ``u (...)`` -> ``(..., order + 1, p + 1)``, where
     ``[..., k, j]`` is the k-th derivative of ``N[span - p + j, p]`` at ``u``.
     Derivatives above the degree are zero.
+
+    The k-th derivative applies the difference operator ``q (E[r-1] - E[r])`` with
+    ``E[r] = G[r] / dens[q][r]`` for ``q = p - k + 1 .. p`` to the degree ``p - k`` values.
     """
     p = degree
-    left, right = _knot_differences(knots, p, spans, u)
-    # ndu[j][r]: basis values (upper triangle, r >= j... stored as ndu[r][j]) and knot differences (lower).
-    ndu = [[None] * (p + 1) for _ in range(p + 1)]
-    ndu[0][0] = torch.ones_like(u)
-    for j in range(1, p + 1):
-        saved = torch.zeros_like(u)
-        for r in range(j):
-            ndu[j][r] = right[r + 1] + left[j - r]
-            temp = ndu[r][j - 1] / ndu[j][r]
-            ndu[r][j] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        ndu[j][j] = saved
-
-    zero = torch.zeros_like(u)
-    top = min(order, p)
-    ders = [[zero] * (p + 1) for _ in range(order + 1)]
-    for j in range(p + 1):
-        ders[0][j] = ndu[j][p]
-    for r in range(p + 1):
-        a_prev = [torch.ones_like(u)] + [zero] * p
-        for k in range(1, top + 1):
-            a_next = [zero] * (p + 1)
-            d = zero
-            rk, pk = r - k, p - k
-            if r >= k:
-                a_next[0] = a_prev[0] / ndu[pk + 1][rk]
-                d = a_next[0] * ndu[rk][pk]
-            j1 = 1 if rk >= -1 else -rk
-            j2 = k - 1 if r - 1 <= pk else p - r
-            for j in range(j1, j2 + 1):
-                a_next[j] = (a_prev[j] - a_prev[j - 1]) / ndu[pk + 1][rk + j]
-                d = d + a_next[j] * ndu[rk + j][pk]
-            if r <= pk:
-                a_next[k] = -a_prev[k - 1] / ndu[pk + 1][r]
-                d = d + a_next[k] * ndu[r][pk]
-            ders[k][r] = d
-            a_prev = a_next
-    factor = float(p)
-    rows = [torch.stack(ders[0])]
+    values, dens = _levels(knot_window(knots, p, spans), p, u)
+    rows = [values[p]]
     for k in range(1, order + 1):
-        rows.append(torch.stack(ders[k]) * factor)
-        factor *= p - k
-    return torch.stack(rows).movedim((0, 1), (-2, -1))  # (order + 1, p + 1, ...) -> (..., order + 1, p + 1)
+        if k > p:
+            rows.append(torch.zeros_like(values[p]))
+            continue
+        G = values[p - k]
+        for q in range(p - k + 1, p + 1):
+            E = G / dens[q]
+            G = (F.pad(E, (1, 0)) - F.pad(E, (0, 1))) * q
+        rows.append(G)
+    return torch.stack(rows, dim=-2)
 
 
 def basis_matrix(knots: Tensor, degree: int, n_ctrl: int, u: Tensor, order: int = 0) -> Tensor:
     """Dense basis matrix: ``B[..., i] = N[i, p](u)`` (or its derivatives).
 
     Shapes: ``u (M,)`` -> ``(M, n_ctrl)`` for ``order == 0``, else
-    ``(order + 1, M, n_ctrl)`` with the k-th derivative in slice ``k``.
+    ``(order + 1, M, n_ctrl)`` with the k-th derivative in slice ``k``. With one knot
+    vector per batch element, ``knots (*B, m)`` and ``u (*B, M)`` (or ``(M,)``, shared) ->
+    ``(*B, M, n_ctrl)`` or ``(*B, order + 1, M, n_ctrl)``.
     A grid of a surface is then ``B_u @ Pw @ B_v^T`` (see ``tensor.evaluate_grid``).
     """
+    if knots.ndim > 1 and u.shape[:-1] != knots.shape[:-1]:
+        u = u.expand(knots.shape[:-1] + u.shape[-1:])
     spans = find_spans(knots, degree, n_ctrl, u)
     columns = spans.unsqueeze(-1) - degree + torch.arange(degree + 1, device=u.device)
     if order == 0:
         values = basis_functions(knots, degree, spans, u)
         return u.new_zeros(u.shape + (n_ctrl,)).scatter(-1, columns, values)
-    values = basis_function_derivatives(knots, degree, spans, u, order).movedim(-2, 0)
-    columns = columns.unsqueeze(0).expand(order + 1, *columns.shape)
-    return u.new_zeros((order + 1,) + u.shape + (n_ctrl,)).scatter(-1, columns, values)
+    values = basis_function_derivatives(knots, degree, spans, u, order)  # (*, M, o + 1, p + 1)
+    dense = u.new_zeros(u.shape + (order + 1, n_ctrl)).scatter(
+        -1, columns.unsqueeze(-2).expand(values.shape), values
+    )
+    return dense.movedim(-2, -3)  # (*, o + 1, M, n_ctrl)

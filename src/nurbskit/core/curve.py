@@ -10,24 +10,33 @@ Tensor = torch.Tensor
 
 
 class NURBSCurve(TensorSpline):
-    """A rational B-spline curve in any dimension.
+    """A rational B-spline curve in any dimension, or a batch of them.
 
     Args:
-        control_points: ``(n, dim)``.
-        degree: polynomial degree ``p >= 1``.
-        knot_vector: ``(n + p + 1,)`` non-decreasing; default clamped uniform on [0, 1].
-        weights: ``(n,)`` positive; default ones.
+        control_points: ``(*B, n, dim)``; ``*B`` batch axes (none for one curve).
+        degree: polynomial degree ``p >= 1`` (one for the whole batch).
+        knot_vector: ``(n + p + 1,)`` non-decreasing, shared, or ``(*B, n + p + 1)`` one per
+            element; default clamped uniform on [0, 1].
+        weights: ``(*B, n)`` (or ``(n,)``, shared) positive; default ones.
+        validate: check everything once here, and parameters against the domain on
+            evaluation (see :mod:`nurbskit.core.spline`); ``False`` inside loops.
 
-    Convention: ``evaluate`` takes parameters ``(..., M)`` in the knot domain and returns
-    ``(..., M, dim)``; ``derivatives(u, order=k)`` returns ``(..., M, k + 1, dim)`` with the
-    point itself in slot 0. ``u = u_max`` is the end point.
+    Convention: ``evaluate`` takes parameters ``(*P, M)`` in the knot domain (``(M,)``
+    shared by a batch, ``(*B, M)`` one set per element) and returns
+    ``(*broadcast(B, P), M, dim)``; ``derivatives(u, order=k)`` returns
+    ``(..., M, k + 1, dim)`` with the point itself in slot 0; ``sample(R)`` returns
+    ``(*B, R, dim)``. ``u = u_max`` is the end point.
 
     Example:
         >>> import torch
         >>> c = NURBSCurve(torch.tensor([[1., 0.], [1., 1.], [0., 1.]]), degree=2,
         ...                weights=torch.tensor([1., 2 ** -0.5, 1.]))
-        >>> c.evaluate(torch.tensor([0.5])).norm(dim=-1)  # a quarter circle
-        tensor([1.])
+        >>> radius = c.evaluate(torch.linspace(0, 1, 5)).norm(dim=-1)
+        >>> bool((radius - 1).abs().max() < 1e-6)  # a quarter circle
+        True
+        >>> batch = NURBSCurve(torch.rand(8, 4, 3), degree=3)  # eight cubic curves
+        >>> batch.evaluate(torch.rand(10)).shape, batch.sample(16).shape
+        (torch.Size([8, 10, 3]), torch.Size([8, 16, 3]))
     """
 
     para_dim = 1
@@ -46,7 +55,7 @@ class NURBSCurve(TensorSpline):
     def knot_vector(self) -> Tensor:
         return self.knot_vectors[0]
 
-    def tangents(self, params) -> Tensor:
+    def tangents(self, params, *, extrapolate: bool = False) -> Tensor:
         """Unit tangents ``(..., M, dim)``."""
-        d = self.derivatives(params, order=1)[..., 1, :]
+        d = self.derivatives(params, order=1, extrapolate=extrapolate)[..., 1, :]
         return d / d.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(d.dtype).tiny)

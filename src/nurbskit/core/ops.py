@@ -19,6 +19,13 @@ Convention:
 * ``value`` arguments live in the knot domain ``[a, b] = [knots[p], knots[n]]`` of the
   chosen direction; they are rounded to the knots' dtype before use, so the inserted
   knot is exactly the one the matrix was built for.
+* Knots closer than :func:`~nurbskit.core.knots.knot_tolerance` are one knot (as in
+  OpenCASCADE): a value within that distance of an existing knot raises that knot's
+  multiplicity, and values within it of each other are one value. No operation creates a
+  span too short for the basis to divide by (a span of 5e-324 made a curve evaluate to NaN).
+* A batch of splines (control points ``(*B, n_1..n_k, dim)``) sharing its knot vectors
+  is transformed as a whole: every element gets the same new knots. A batch with one
+  knot vector per element is refused (index an element first, ``batch[i]``).
 * A knot may reach multiplicity ``p`` (the degree) by insertion, not more: at
   multiplicity ``p`` a control point already lies on the object (C0 there); ``p + 1``
   would cut it in two, which is what :func:`split` is for.
@@ -46,6 +53,7 @@ import torch
 from scipy import linalg, sparse
 
 from ..errors import NurbskitError
+from .knots import knot_tolerance
 from .spline import TensorSpline
 from .tensor import homogeneous
 
@@ -60,6 +68,11 @@ __all__ = ["insert_knot", "refine_knots", "elevate_degree", "split", "decompose_
 def _check_axis(obj: TensorSpline, axis, op: str) -> int:
     if not isinstance(obj, TensorSpline):
         raise NurbskitError(f"{op}: expected a NURBSCurve, NURBSSurface or NURBSVolume, got {type(obj).__name__}")
+    if any(kv.ndim > 1 for kv in obj.knot_vectors):
+        raise NurbskitError(
+            f"{op}: a batch of shape {obj.batch_shape} with one knot vector per element has no common knots "
+            f"to change; apply it to each element (batch[i])"
+        )
     if isinstance(axis, bool) or not isinstance(axis, (int, np.integer)) or not 0 <= int(axis) < obj.para_dim:
         allowed = "0" if obj.para_dim == 1 else f"0..{obj.para_dim - 1}"
         raise NurbskitError(f"{op}: axis must be an integer in {allowed} for a {obj.kind}, got {axis!r}")
@@ -92,6 +105,24 @@ def _knot_values(obj: TensorSpline, axis: int, values, op: str) -> np.ndarray:
     out = raw.reshape(-1).to(kv.dtype).double().numpy()
     if not np.all(np.isfinite(out)):
         raise NurbskitError(f"{op}: knot values must be finite, got {raw.tolist()!r}")
+    return _snap(out, _knots64(obj, axis), knot_tolerance(kv))
+
+
+def _snap(values: np.ndarray, knots: np.ndarray, tol: float) -> np.ndarray:
+    """Values within ``tol`` of an existing knot become that knot; values within ``tol`` of
+    each other (and of no knot) become the smallest of their run."""
+    out = values.copy()
+    if out.size == 0:
+        return out
+    nearest = np.abs(out[:, None] - knots[None, :])
+    close = nearest.min(axis=1) <= tol
+    out[close] = knots[nearest.argmin(axis=1)[close]]
+    order = np.argsort(out, kind="stable")
+    s = out[order]
+    for i in range(1, s.size):
+        if 0 < s[i] - s[i - 1] <= tol:
+            s[i] = s[i - 1]
+    out[order] = s
     return out
 
 
@@ -111,9 +142,11 @@ def _check_multiplicity(obj: TensorSpline, axis: int, knots: np.ndarray, values:
         have = int(np.sum(knots == v))
         add = int(np.sum(values == v))
         if have + add > p:
+            tol = knot_tolerance(obj.knot_vectors[axis])
             raise NurbskitError(
                 f"{op}: knot {float(v)!r} has multiplicity {have} in {_where(obj, axis)} of degree {p}; "
-                f"inserting it {add} more time(s) would exceed {p} (at most {max(p - have, 0)} more)"
+                f"inserting it {add} more time(s) would exceed {p} (at most {max(p - have, 0)} more; "
+                f"values within {tol:.1e} of a knot are that knot)"
             )
 
 
@@ -135,11 +168,12 @@ def _apply(obj: TensorSpline, axis: int, matrix: np.ndarray, knots: np.ndarray, 
 
     Shapes: ``matrix (n_new, n_old)`` with ``n_old = obj.sizes[axis]``; ``knots (n_new + degree + 1,)``.
     """
-    Pw = homogeneous(obj.control_points, obj.weights)  # (n_1, ..., n_k, dim + 1)
+    Pw = homogeneous(obj.control_points, obj.weights)  # (*B, n_1, ..., n_k, dim + 1)
     T = torch.as_tensor(matrix, dtype=Pw.dtype, device=Pw.device)
     # One GEMM on a reshaped view: (n_new, n_old) @ (n_old, everything else).
-    front = Pw.movedim(axis, 0)
-    moved = (T @ front.reshape(front.shape[0], -1)).reshape((T.shape[0],) + front.shape[1:]).movedim(0, axis)
+    where = len(obj.batch_shape) + axis
+    front = Pw.movedim(where, 0)
+    moved = (T @ front.reshape(front.shape[0], -1)).reshape((T.shape[0],) + front.shape[1:]).movedim(0, where)
     kv_old = obj.knot_vectors[axis]
     kvs = list(obj.knot_vectors)
     kvs[axis] = torch.as_tensor(knots, dtype=torch.float64).to(dtype=kv_old.dtype, device=kv_old.device)
@@ -503,8 +537,9 @@ def reverse(obj: TensorSpline, axis: int = 0) -> TensorSpline:
     kvs = list(obj.knot_vectors)
     kvs[axis] = mirrored.to(kv.dtype)
     # A permutation needs no homogeneous round trip: flipping is exact.
+    where = len(obj.batch_shape) + axis
     return obj._replace(
-        control_points=obj.control_points.flip(axis),
-        weights=obj.weights.flip(axis),
+        control_points=obj.control_points.flip(where),
+        weights=obj.weights.flip(where),
         knot_vectors=kvs,
     )

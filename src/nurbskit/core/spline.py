@@ -1,11 +1,25 @@
 """The shared body of NURBSCurve, NURBSSurface and NURBSVolume.
 
-A spline object holds tensors and nothing else: ``control_points (n_1..n_k, dim)``,
-``weights (n_1..n_k)``, ``knot_vectors`` (one 1-D tensor per direction) and
-``degrees``. Any of the tensors may require gradients; every method is built from
-differentiable tensor operations, so gradients reach control points, weights and
-knots (exactly: the knot gradient is the derivative of the piecewise-rational basis).
+A spline object holds tensors and nothing else: ``control_points (*B, n_1..n_k, dim)``,
+``weights (*B, n_1..n_k)``, ``knot_vectors`` (one per direction, each ``(m_a,)`` shared
+by the batch or ``(*B, m_a)`` per element) and ``degrees`` (one per direction, for the
+whole batch). ``*B`` are batch axes: none for a single spline. Any of the tensors may
+require gradients; every method is built from differentiable tensor operations, so
+gradients reach control points, weights and knots (exactly: the knot gradient is the
+derivative of the piecewise-rational basis), each batch element's from its own outputs.
 dtype and device follow the control points.
+
+Validation happens once, at construction (``validate=True``, the default): shapes,
+finiteness, positive weights, knot vectors (knots closer than
+:func:`~nurbskit.core.knots.knot_tolerance` merged into one). A validated object also
+checks, in :meth:`TensorSpline.evaluate`, :meth:`~TensorSpline.derivatives` and
+:meth:`~TensorSpline.evaluate_grid`, that parameters lie in the knot domain, and raises
+an error naming the parameter, its value and the domain unless ``extrapolate=True``.
+That check reads one boolean back to the host per call, which on a GPU waits for the
+device; objects built with ``validate=False`` (as a fitting loop builds them, and as
+every object derived internally through ``_replace`` is) skip it, and then evaluation,
+derivatives and sampling read nothing back to the host at all. :meth:`~TensorSpline.sample`
+never checks: its grid lies in the domain by construction.
 """
 
 from __future__ import annotations
@@ -17,7 +31,7 @@ import torch
 
 from ..errors import NurbskitError
 from . import tensor as _tp
-from .knots import clamped_uniform, validate_knot_vector
+from .knots import clamped_uniform, merge_close_knots, validate_knot_vector
 
 Tensor = torch.Tensor
 _AXES = ("u", "v", "w")
@@ -32,7 +46,7 @@ def _as_tensor(x, dtype=None, device=None) -> Tensor:
 
 
 class TensorSpline:
-    """A rational tensor-product B-spline with ``para_dim`` parametric directions."""
+    """A rational tensor-product B-spline with ``para_dim`` parametric directions, or a batch of them."""
 
     para_dim: int = 0
     kind: str = ""
@@ -50,13 +64,15 @@ class TensorSpline:
         cp = _as_tensor(control_points)
         if not cp.is_floating_point():
             cp = cp.to(torch.get_default_dtype())
-        if validate and cp.ndim != k + 1:
+        if validate and cp.ndim < k + 1:
             shape = ", ".join(f"n_{a}" for a in _AXES[:k])
             raise NurbskitError(
-                f"{self.kind} control points must have shape ({shape}, dim), got {tuple(cp.shape)}"
+                f"{self.kind} control points must have shape ({shape}, dim) or (*batch, {shape}, dim), "
+                f"got {tuple(cp.shape)}"
             )
         dtype, device = cp.dtype, cp.device
-        sizes = tuple(cp.shape[:k])
+        batch = tuple(cp.shape[: cp.ndim - k - 1])
+        sizes = tuple(cp.shape[cp.ndim - k - 1 : -1])
         degrees = tuple(int(d) for d in degrees)
         if validate:
             if len(degrees) != k:
@@ -78,15 +94,22 @@ class TensorSpline:
         for a, (kv, p, n) in enumerate(zip(knot_vectors, degrees, sizes)):
             kv = clamped_uniform(n, p, dtype=dtype, device=device) if kv is None else _as_tensor(kv, dtype, device)
             if validate:
-                validate_knot_vector(kv, p, n, _AXES[a] if k > 1 else "")
+                axis = _AXES[a] if k > 1 else ""
+                validate_knot_vector(kv, p, n, axis, batch)  # shapes first, then merge, then the domain
+                kv = merge_close_knots(kv)
+                validate_knot_vector(kv, p, n, axis, batch)
             kvs.append(kv)
         if weights is None:
-            w = torch.ones(sizes, dtype=dtype, device=device)
+            w = torch.ones(batch + sizes, dtype=dtype, device=device)
         else:
             w = _as_tensor(weights, dtype, device)
             if validate:
-                if tuple(w.shape) != sizes:
-                    raise NurbskitError(f"weights must have shape {sizes} to match the control points, got {tuple(w.shape)}")
+                if tuple(w.shape) == sizes and batch:
+                    w = w.expand(batch + sizes)
+                if tuple(w.shape) != batch + sizes:
+                    raise NurbskitError(
+                        f"weights must have shape {batch + sizes} to match the control points, got {tuple(w.shape)}"
+                    )
                 wd = w.detach()
                 if not torch.isfinite(wd).all() or not (wd > 0).all():
                     bad = wd[~(wd > 0) | ~torch.isfinite(wd)].flatten()[0].item()
@@ -95,8 +118,14 @@ class TensorSpline:
         self.weights = w
         self.knot_vectors = kvs
         self.degrees = degrees
+        self.validate = bool(validate)
 
     # ---- description -------------------------------------------------------------
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The batch axes ``*B`` (``()`` for a single spline)."""
+        return tuple(self.control_points.shape[: self.control_points.ndim - self.para_dim - 1])
+
     @property
     def dim(self) -> int:
         """Dimension of the control points (1 for scalar fields, 2 or 3 for geometry)."""
@@ -105,7 +134,8 @@ class TensorSpline:
     @property
     def sizes(self) -> tuple[int, ...]:
         """Number of control points along each parametric direction."""
-        return tuple(self.control_points.shape[: self.para_dim])
+        nb = len(self.batch_shape)
+        return tuple(self.control_points.shape[nb : nb + self.para_dim])
 
     @property
     def dtype(self) -> torch.dtype:
@@ -116,12 +146,14 @@ class TensorSpline:
         return self.control_points.device
 
     @property
-    def domain(self) -> list[tuple[float, float]]:
-        """``[(knots[p], knots[n]), ...]`` per direction, as Python floats."""
-        return [
-            (float(kv[p].detach()), float(kv[n].detach()))
-            for kv, p, n in zip(self.knot_vectors, self.degrees, self.sizes)
-        ]
+    def domain(self) -> list[tuple]:
+        """``[(knots[p], knots[n]), ...]`` per direction: Python floats for a shared knot
+        vector, tensors ``(*B,)`` for per-element knot vectors (reads the host)."""
+        out = []
+        for kv, p, n in zip(self.knot_vectors, self.degrees, self.sizes):
+            k = kv.detach()
+            out.append((float(k[p]), float(k[n])) if k.ndim == 1 else (k[..., p], k[..., n]))
+        return out
 
     @property
     def is_rational(self) -> bool:
@@ -129,14 +161,45 @@ class TensorSpline:
         return bool((w != w.flatten()[0]).any())
 
     def __repr__(self) -> str:
+        batch = f"batch_shape={self.batch_shape}, " if self.batch_shape else ""
         return (
-            f"{type(self).__name__}(sizes={self.sizes}, degrees={self.degrees}, dim={self.dim}, "
+            f"{type(self).__name__}({batch}sizes={self.sizes}, degrees={self.degrees}, dim={self.dim}, "
             f"rational={self.is_rational}, dtype={self.dtype}, device={self.device})"
         )
 
+    def __len__(self) -> int:
+        if not self.batch_shape:
+            raise TypeError(f"a single {self.kind} has no len(); only a batch does")
+        return self.batch_shape[0]
+
+    def __getitem__(self, index) -> "TensorSpline":
+        """Batch elements: ``batch[i]`` is one spline (or a smaller batch), sharing storage."""
+        if not self.batch_shape:
+            raise NurbskitError(f"indexing selects batch elements, but this {self.kind} is not a batch")
+        index = index if isinstance(index, tuple) else (index,)
+        nb = len(self.batch_shape)
+        if len(index) > nb or any(i is Ellipsis or i is None for i in index):
+            raise NurbskitError(f"index {index!r} must select among the batch axes {self.batch_shape}")
+        cp = self.control_points[index]
+        return self._replace(
+            control_points=cp,
+            weights=self.weights[index],
+            knot_vectors=[kv if kv.ndim == 1 else kv[index] for kv in self.knot_vectors],
+        )
+
+    def require_single(self, op: str) -> None:
+        """Raise a one-line NurbskitError when this is a batch (for operations on one spline)."""
+        if self.batch_shape:
+            raise NurbskitError(
+                f"{op} works on one {self.kind}, got a batch of shape {self.batch_shape}: "
+                f"select an element first (batch[i])"
+            )
+
     # ---- construction helpers ------------------------------------------------------
     def _replace(self, **changes) -> "TensorSpline":
-        """A new object of the same kind with some tensors replaced (no validation)."""
+        """A new object of the same kind with some tensors replaced (no validation, and
+        no domain check on evaluation: for internal use and loops)."""
+        validate = changes.pop("validate", False)
         args = dict(
             control_points=self.control_points,
             weights=self.weights,
@@ -148,6 +211,7 @@ class TensorSpline:
         TensorSpline.__init__(
             obj, args["control_points"], args["degrees"], args["knot_vectors"], args["weights"], validate=False
         )
+        obj.validate = validate
         return obj
 
     def to(self, *args, **kwargs) -> "TensorSpline":
@@ -156,6 +220,7 @@ class TensorSpline:
             control_points=self.control_points.to(*args, **kwargs),
             weights=self.weights.to(*args, **kwargs),
             knot_vectors=[kv.to(*args, **kwargs) for kv in self.knot_vectors],
+            validate=self.validate,
         )
 
     def detach(self) -> "TensorSpline":
@@ -163,6 +228,7 @@ class TensorSpline:
             control_points=self.control_points.detach(),
             weights=self.weights.detach(),
             knot_vectors=[kv.detach() for kv in self.knot_vectors],
+            validate=self.validate,
         )
 
     def clone(self) -> "TensorSpline":
@@ -170,6 +236,7 @@ class TensorSpline:
             control_points=self.control_points.clone(),
             weights=self.weights.clone(),
             knot_vectors=[kv.clone() for kv in self.knot_vectors],
+            validate=self.validate,
         )
 
     # ---- evaluation ----------------------------------------------------------------
@@ -183,49 +250,107 @@ class TensorSpline:
             )
         return t
 
-    def evaluate(self, params) -> Tensor:
-        """Points at parameters in the knot domain: ``(..., M[, k])`` -> ``(..., M, dim)``."""
-        return _tp.evaluate(self.control_points, self.weights, self.knot_vectors, self.degrees, self._params(params))
+    def _check_domain(self, t: Tensor, extrapolate: bool, grid_axis: int | None = None, given=None) -> None:
+        """Raise when a parameter lies outside the knot domain (one host read; see the module docstring).
+
+        ``t (..., M, k)`` or, for one grid axis, ``(..., R)``. A slack of 8 units in the
+        last place of the domain ends (in the coarser of the spline's dtype and that of the
+        ``given`` parameters) absorbs parameters computed or rounded in floating point.
+        """
+        if extrapolate or not self.validate:
+            return
+        axes = range(self.para_dim) if grid_axis is None else [grid_axis]
+        lo = torch.stack([self.knot_vectors[a].detach()[..., self.degrees[a]] for a in axes], -1)
+        hi = torch.stack([self.knot_vectors[a].detach()[..., self.sizes[a]] for a in axes], -1)
+        eps = torch.finfo(lo.dtype).eps
+        if isinstance(given, Tensor) and given.is_floating_point():
+            eps = max(eps, torch.finfo(given.dtype).eps)
+        slack = 8 * eps * torch.maximum(lo.abs(), hi.abs())
+        lo, hi = lo - slack, hi + slack
+        if lo.ndim > 1:  # per-element domains (*B, k): align with (*B, M, k)
+            lo, hi = lo.unsqueeze(-2), hi.unsqueeze(-2)
+        x = t.detach() if grid_axis is None else t.detach().unsqueeze(-1)
+        inside = (x >= lo) & (x <= hi)
+        if bool(inside.all()):
+            return
+        where = tuple(int(i) for i in (~inside).nonzero()[0])
+        a = list(axes)[where[-1]]
+        value = float(x.expand(inside.shape)[where])
+        k = self.knot_vectors[a].detach()
+        row = k if k.ndim == 1 else k[where[: k.ndim - 1]]
+        dom = (float(row[self.degrees[a]]), float(row[self.sizes[a]]))
+        name = f"parameter {_AXES[a]}" if self.para_dim > 1 else "parameter u"
+        raise NurbskitError(
+            f"{self.kind} {name} = {value!r} lies outside the domain [{dom[0]!r}, {dom[1]!r}] "
+            f"(pass extrapolate=True to evaluate the polynomial continuation)"
+        )
+
+    def evaluate(self, params, *, extrapolate: bool = False) -> Tensor:
+        """Points at parameters in the knot domain: ``(*P, M[, k])`` -> ``(*broadcast(B, P), M, dim)``.
+
+        Outside the domain raises (on a validated object) unless ``extrapolate=True``, which
+        evaluates the first or last span's polynomial.
+        """
+        t = self._params(params)
+        self._check_domain(t, extrapolate, given=params)
+        return _tp.evaluate(self.control_points, self.weights, self.knot_vectors, self.degrees, t)
 
     __call__ = evaluate
 
-    def derivatives(self, params, order: int = 1) -> Tensor:
+    def derivatives(self, params, order: int = 1, *, extrapolate: bool = False) -> Tensor:
         """Partial derivatives up to ``order`` per direction (see the class docstring for shapes)."""
         if order < 0:
             raise NurbskitError(f"derivative order must be >= 0, got {order}")
-        return _tp.derivatives(
-            self.control_points, self.weights, self.knot_vectors, self.degrees, self._params(params), order
-        )
+        t = self._params(params)
+        self._check_domain(t, extrapolate, given=params)
+        return _tp.derivatives(self.control_points, self.weights, self.knot_vectors, self.degrees, t, order)
+
+    def _resolution(self, resolution) -> tuple[int, ...]:
+        if isinstance(resolution, (int, np.integer)):
+            resolution = (int(resolution),) * self.para_dim
+        resolution = tuple(resolution)
+        if len(resolution) != self.para_dim or min(resolution) < 1:
+            raise NurbskitError(f"resolution must be {self.para_dim} positive integer(s), got {resolution}")
+        return tuple(int(r) for r in resolution)
 
     def grid_axes(self, resolution: int | Sequence[int]) -> list[Tensor]:
-        """Uniformly spaced parameters over the domain, ends included, per direction."""
-        if isinstance(resolution, int):
-            resolution = (resolution,) * self.para_dim
-        if len(resolution) != self.para_dim or min(resolution) < 1:
-            raise NurbskitError(f"resolution must be {self.para_dim} positive integer(s), got {tuple(resolution)}")
+        """Uniformly spaced parameters over the domain, ends included, per direction:
+        ``(R_a,)``, or ``(*B, R_a)`` for a per-element knot vector. No host reads."""
+        res = self._resolution(resolution)
         return [
-            torch.linspace(a, b, int(r), dtype=self.dtype, device=self.device)
-            for (a, b), r in zip(self.domain, resolution)
+            _tp.uniform_axis(kv, p, n, r) for kv, p, n, r in zip(self.knot_vectors, self.degrees, self.sizes, res)
         ]
 
-    def evaluate_grid(self, *axes, order: int = 0) -> Tensor:
-        """Points on the tensor grid of the given 1-D parameter arrays, through basis matrices.
+    def evaluate_grid(self, *axes, order: int = 0, extrapolate: bool = False) -> Tensor:
+        """Points on the tensor grid of the given parameter arrays, through basis matrices.
 
-        ``evaluate_grid(u, v)`` -> ``(R, S, dim)``; with ``order > 0`` the derivative axes
-        follow the grid axes, as in :meth:`derivatives`.
+        ``evaluate_grid(u, v)`` -> ``(*B, R, S, dim)`` for axes ``(R,)``, ``(S,)`` (or per
+        element ``(*B, R)``); with ``order > 0`` the derivative axes follow the grid axes,
+        as in :meth:`derivatives`.
         """
         if len(axes) != self.para_dim:
             raise NurbskitError(f"{self.kind} evaluate_grid takes {self.para_dim} parameter arrays, got {len(axes)}")
-        axes = [_as_tensor(a, self.dtype, self.device).reshape(-1) for a in axes]
+        given = axes
+        axes = [_as_tensor(a, self.dtype, self.device) for a in axes]
+        axes = [a.reshape(-1) if a.ndim <= 1 else a for a in axes]
+        for a, ax in enumerate(axes):
+            self._check_domain(ax, extrapolate, grid_axis=a, given=given[a])
         return _tp.evaluate_grid(self.control_points, self.weights, self.knot_vectors, self.degrees, axes, order)
 
-    def sample(self, resolution: int | Sequence[int]) -> Tensor:
-        """The object on a uniform parametric grid (the thesis's "parametric sampling")."""
-        return self.evaluate_grid(*self.grid_axes(resolution))
+    def sample(self, resolution: int | Sequence[int], order: int = 0) -> Tensor:
+        """The object on a uniform parametric grid (the thesis's "parametric sampling").
+
+        ``(*B, R_1, ..., R_k, dim)`` (with ``order > 0`` the derivative axes follow, as in
+        :meth:`evaluate_grid`). The grid is :meth:`grid_axes`; with fixed knots the basis
+        matrices are cached, so repeated calls (a fit) cost a few GEMMs and no host reads.
+        """
+        return _tp.sample(self.control_points, self.weights, self.knot_vectors, self.degrees,
+                          self._resolution(resolution), order)
 
     # ---- conversion ----------------------------------------------------------------
     def to_dict(self) -> dict:
-        """The nurbskit JSON structure (see :mod:`nurbskit.core.serialize`)."""
+        """The nurbskit JSON structure (see :mod:`nurbskit.core.serialize`); one spline only."""
         from .serialize import to_dict
 
+        self.require_single("to_dict")
         return to_dict(self)

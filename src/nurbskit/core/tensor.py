@@ -1,17 +1,34 @@
 """Tensor-product rational B-splines of any parametric dimension: one mechanism for
-curves (k = 1), surfaces (k = 2) and volumes (k = 3).
+curves (k = 1), surfaces (k = 2) and volumes (k = 3), for one spline or a batch.
 
-Convention: control points ``(n_1, ..., n_k, dim)`` with the first parametric
-direction on the first grid axis; weights ``(n_1, ..., n_k)``. Internally the
-evaluation works on homogeneous points ``(w * P, w)`` and divides once at the end.
+Convention: control points ``(*B, n_1, ..., n_k, dim)`` with the first parametric
+direction on the first grid axis after the batch axes ``*B`` (none for one spline);
+weights ``(*B, n_1, ..., n_k)``; knot vectors one per direction, each shared ``(m_a,)``
+or one per batch element ``(*B, m_a)``; one degree per direction for the whole batch.
+Parameters ``(*P, M, k)`` broadcast against the batch: ``(M, k)`` is shared by every
+element, ``(*B, M, k)`` is one set per element, and for a single spline any leading
+axes are kept (``(..., M, k) -> (..., M, dim)``). Internally the evaluation works on
+homogeneous points ``(w * P, w)`` and divides once at the end.
 
 Two ways in:
 
-* scattered parameters ``(..., M, k)``: spans by ``searchsorted``, the ``p + 1``
-  non-zero basis values per direction, a gather of the local control block and one
-  contraction (cost ``M * prod(p_a + 1)``);
-* grids: dense basis matrices ``B_a (R_a, n_a)`` and ``k`` successive matrix products
-  (``B_u @ Pw @ B_v^T`` for a surface), which is what BLAS and GPUs are built for.
+* scattered parameters: spans by ``searchsorted``, the ``p + 1`` non-zero basis values
+  per direction, a gather of the local control block and one contraction (cost
+  ``M * prod(p_a + 1)``);
+* grids: dense basis matrices ``B_a (R_a, n_a)`` and ``k`` matrix products, which is
+  what BLAS and GPUs are built for. The last direction is applied as one product with
+  ``B_k^T kron I_D`` on the channel-last control net, so that a surface grid is two
+  GEMMs and a division, and the result comes out channel-last without a transpose.
+
+Basis cache: when neither the knots nor the parameters need gradients, the basis (the
+matrices of a grid, the spans and values of scattered parameters) is kept in a small
+LRU cache keyed on the identity, ``_version`` counter and storage of the knot and
+parameter tensors (see :class:`BasisCache`); a fit with fixed knots then pays only for
+the products. Any in-place change to a key tensor bumps its version, so a stale basis is
+never served; a tensor that needs gradients is never cached.
+
+Nothing on these paths reads a value back to the host (no ``.item()``, no Python ``if``
+on a tensor, no boolean-mask indexing): on a GPU they never wait for the device.
 
 Derivatives of the rational map use the generalised quotient rule
 (The NURBS Book, eq. 4.8 / A4.4 for surfaces): for a multi-index ``alpha``,
@@ -22,8 +39,10 @@ from __future__ import annotations
 
 import itertools
 import math
+import weakref
+from collections import OrderedDict
 from math import comb
-from typing import Sequence
+from typing import Callable, Sequence
 
 import torch
 
@@ -32,6 +51,110 @@ from .knots import find_spans
 
 Tensor = torch.Tensor
 
+# Channels up to which the last direction is applied through B^T kron I_D (one GEMM on
+# the channel-last net); wider nets (scalar fields with many channels) use a batched product.
+_KRON_MAX_CHANNELS = 8
+
+
+# ---- the basis cache ----------------------------------------------------------------------
+
+class BasisCache:
+    """An LRU cache of basis tensors keyed on the tensors they were built from.
+
+    A key tensor is identified by its ``id``, storage pointer, ``_version`` (bumped by
+    every in-place change), shape, strides and offset, and checked through a weak
+    reference on every hit, so a freed tensor whose ``id`` is reused never matches; the
+    entry dies with its key tensor. Tensors that require gradients (or inference-mode
+    tensors, which have no version counter) are never cached: the basis is then built
+    afresh, differentiably. Bounded by ``max_entries`` and ``max_bytes``.
+    """
+
+    def __init__(self, max_entries: int = 256, max_bytes: int = 512 << 20):
+        self.max_entries = max_entries
+        self.max_bytes = max_bytes
+        self._entries: OrderedDict = OrderedDict()
+        self._bytes = 0
+        self.hits = 0
+        self.misses = 0
+        self.enabled = True
+
+    @staticmethod
+    def _identity(t: Tensor):
+        if t.requires_grad or t.is_inference():
+            return None
+        base = t if t._base is None else t._base  # a view made per call keys on its base
+        try:
+            return base, (id(base), base.data_ptr(), base._version, tuple(t.shape), t.stride(), t.storage_offset())
+        except (RuntimeError, NotImplementedError):  # functorch wrappers and other tensor subclasses
+            return None
+
+    def get(self, tensors: Sequence[Tensor], extra: tuple, build: Callable[[], object]):
+        """``build()``, or its cached value for these ``tensors`` and ``extra`` key."""
+        if not self.enabled:
+            return build()
+        ids, bases = [], []
+        for t in tensors:
+            found = self._identity(t)
+            if found is None:
+                return build()
+            bases.append(found[0])
+            ids.append(found[1])
+        tensors = bases
+        key = (tuple(ids), extra)
+        entry = self._entries.get(key)
+        if entry is not None and all(r() is t for r, t in zip(entry[0], tensors)):
+            self._entries.move_to_end(key)
+            self.hits += 1
+            return entry[1]
+        self.misses += 1
+        with torch.no_grad():
+            value = build()
+        size = sum(v.numel() * v.element_size() for v in _tensors_in(value))
+        if size > self.max_bytes:
+            return value
+
+        def forget(_, key=key):
+            e = self._entries.get(key)
+            if e is not None and e[0] is refs:
+                self._pop(key)
+
+        refs = tuple(weakref.ref(t, forget) for t in tensors)
+        if key in self._entries:
+            self._pop(key)
+        self._entries[key] = (refs, value, size)
+        self._bytes += size
+        while len(self._entries) > self.max_entries or self._bytes > self.max_bytes:
+            self._pop(next(iter(self._entries)))
+        return value
+
+    def _pop(self, key) -> None:
+        entry = self._entries.pop(key, None)
+        if entry is not None:
+            self._bytes -= entry[2]
+
+    def clear(self) -> None:
+        self._entries.clear()
+        self._bytes = 0
+        self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+
+def _tensors_in(value):
+    if isinstance(value, Tensor):
+        yield value
+    elif isinstance(value, (tuple, list)):
+        for v in value:
+            yield from _tensors_in(v)
+
+
+basis_cache = BasisCache()
+"""The process-wide cache used by :func:`evaluate`, :func:`derivatives`, :func:`evaluate_grid` and :func:`sample`."""
+
+
+
+# ---- homogeneous points and batch plumbing -------------------------------------------------
 
 def homogeneous(control_points: Tensor, weights: Tensor) -> Tensor:
     """``(w * P, w)``: shapes ``(..., dim)``, ``(...)`` -> ``(..., dim + 1)``."""
@@ -39,14 +162,27 @@ def homogeneous(control_points: Tensor, weights: Tensor) -> Tensor:
     return torch.cat([control_points * w, w], dim=-1)
 
 
-def _gather_blocks(Pw: Tensor, spans: Sequence[Tensor], degrees: Sequence[int]) -> Tensor:
-    """Local control blocks ``(..., M, p_1 + 1, ..., p_k + 1, D)`` for each point.
+def batch_shape(control_points: Tensor, k: int) -> tuple[int, ...]:
+    """The batch axes ``*B`` of control points ``(*B, n_1..n_k, dim)``."""
+    return tuple(control_points.shape[: control_points.ndim - k - 1])
 
-    One ``index_select`` on the flattened control net with a flat index built from the
-    spans (advanced indexing with k index tensors is far slower on CPU).
+
+def _per_element(knot_vectors: Sequence[Tensor]) -> bool:
+    return any(kv.ndim > 1 for kv in knot_vectors)
+
+
+# ---- scattered parameters --------------------------------------------------------------------
+
+def _gather_blocks(Pw: Tensor, spans: Sequence[Tensor], degrees: Sequence[int], offset: Tensor | None = None) -> Tensor:
+    """Local control blocks ``(M, p_1 + 1, ..., p_k + 1, D)`` for each point.
+
+    ``Pw (..., n_1..n_k, D)`` is read as one flat table of rows; ``spans[a] (M,)``;
+    ``offset (M,)`` (optional) is added to the flat row index (a batch element's first
+    row). One ``index_select`` on a flat index built from the spans (advanced indexing
+    with k index tensors is far slower on CPU).
     """
     k = len(degrees)
-    sizes = Pw.shape[:k]
+    sizes = Pw.shape[-k - 1 : -1]
     flat = None
     stride = 1
     for a in reversed(range(k)):
@@ -56,6 +192,8 @@ def _gather_blocks(Pw: Tensor, spans: Sequence[Tensor], degrees: Sequence[int]) 
         term = idx.reshape(shape) * stride
         flat = term if flat is None else flat + term
         stride *= sizes[a]
+    if offset is not None:
+        flat = flat + offset.reshape(offset.shape + (1,) * k)
     D = Pw.shape[-1]
     rows = Pw.reshape(-1, D).index_select(0, flat.reshape(-1))
     return rows.reshape(flat.shape + (D,))
@@ -81,25 +219,69 @@ def _contract(block: Tensor, bases: Sequence[Tensor]) -> Tensor:
     return X.reshape((M, *orders, block.shape[-1]))
 
 
-def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None) -> Tensor:
-    """Homogeneous values (``order`` None) or derivatives at ``params (..., M, k)``."""
-    k = len(degrees)
-    lead = params.shape[:-1]
-    flat = params.reshape(-1, k)
-    sizes = Pw.shape[:k]
-    spans, bases = [], []
-    for a in range(k):
-        u = flat[:, a]
-        s = find_spans(knot_vectors[a], degrees[a], sizes[a], u)
-        spans.append(s)
-        if order is None:
-            bases.append(basis_functions(knot_vectors[a], degrees[a], s, u).unsqueeze(-2))
-        else:
-            bases.append(basis_function_derivatives(knot_vectors[a], degrees[a], s, u, order))
-    h = _contract(_gather_blocks(Pw, spans, degrees), bases)
+def _span_basis(kv: Tensor, p: int, n: int, u: Tensor, order: int | None) -> tuple[Tensor, Tensor]:
+    """Spans ``(...)`` and basis values ``(..., o + 1, p + 1)`` at ``u`` (``o = 0`` for ``order`` None)."""
+    s = find_spans(kv, p, n, u)
     if order is None:
-        h = h.reshape(h.shape[0], h.shape[-1])
-    return h.reshape(lead + h.shape[1:])
+        return s, basis_functions(kv, p, s, u).unsqueeze(-2)
+    return s, basis_function_derivatives(kv, p, s, u, order)
+
+
+def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None) -> Tensor:
+    """Homogeneous values (``order`` None) or derivatives at ``params (*P, M, k)``.
+
+    ``Pw (*B, n_1..n_k, D)`` -> ``(*broadcast(B, P), M, [o + 1, ... (k times),] D)``.
+    """
+    k = len(degrees)
+    B = batch_shape(Pw, k)
+    sizes = tuple(Pw.shape[len(B) : len(B) + k])
+    D = Pw.shape[-1]
+    P, M = tuple(params.shape[:-2]), params.shape[-2]
+    per_element = _per_element(knot_vectors)
+    extra = ("scattered", tuple(degrees), sizes, order, B)
+    if not per_element and (not B or not P):
+        # One set of parameters for every element: the basis is computed once, and the
+        # batch rides along as extra channels of one contraction.
+        flat = params.reshape(-1, k)
+
+        def build():
+            return [_span_basis(knot_vectors[a], degrees[a], sizes[a], flat[:, a], order) for a in range(k)]
+        found = basis_cache.get([params, *knot_vectors], extra, build)
+        spans = [s for s, _ in found]
+        bases = [b for _, b in found]
+        if B:
+            Bt = math.prod(B)
+            folded = Pw.reshape((Bt,) + sizes + (D,)).movedim(0, -2).reshape(sizes + (Bt * D,))
+            h = _contract(_gather_blocks(folded, spans, degrees), bases)  # (M, o.., Bt * D)
+            h = h.reshape(h.shape[:-1] + (Bt, D)).movedim(-2, 0)
+            h = h.reshape(B + (M,) + h.shape[2:])
+        else:
+            h = _contract(_gather_blocks(Pw, spans, degrees), bases)
+            h = h.reshape(P + (M,) + h.shape[1:])
+    else:
+        Bout = torch.broadcast_shapes(B, P)
+        Bt = math.prod(Bout)
+        prm = params.expand(Bout + (M, k)).reshape(Bt, M, k)
+        kvs = [kv if kv.ndim == 1 else kv.expand(Bout + kv.shape[-1:]).reshape(Bt, -1) for kv in knot_vectors]
+
+        def build():
+            out = []
+            for a in range(k):
+                u = prm[..., a]  # (Bt, M)
+                s, b = _span_basis(kvs[a], degrees[a], sizes[a], u if kvs[a].ndim > 1 else u.reshape(-1), order)
+                out.append((s.reshape(-1), b.reshape((Bt * M,) + b.shape[-2:])))
+            return out
+
+        found = basis_cache.get([params, *knot_vectors], extra + (Bout,), build)
+        spans = [s for s, _ in found]
+        bases = [b for _, b in found]
+        element = torch.arange(math.prod(B), device=Pw.device).reshape(B).expand(Bout).reshape(Bt, 1)
+        offset = (element * math.prod(sizes)).expand(Bt, M).reshape(-1)
+        h = _contract(_gather_blocks(Pw, spans, degrees, offset), bases)
+        h = h.reshape(Bout + (M,) + h.shape[1:])
+    if order is None:
+        h = h.reshape(h.shape[: -1 - k] + h.shape[-1:])
+    return h
 
 
 def homogeneous_derivatives_to_points(hders: Tensor, k: int) -> Tensor:
@@ -138,13 +320,15 @@ def evaluate(
     degrees: Sequence[int],
     params: Tensor,
 ) -> Tensor:
-    """Points of a rational tensor-product spline at scattered parameters.
+    """Points of a rational tensor-product spline (or a batch) at scattered parameters.
 
-    Shapes: ``control_points (n_1, ..., n_k, dim)``, ``weights (n_1, ..., n_k)``,
-    ``params (..., M, k)`` -> ``(..., M, dim)``.
+    Shapes: ``control_points (*B, n_1, ..., n_k, dim)``, ``weights (*B, n_1, ..., n_k)``,
+    knot vectors ``(m_a,)`` or ``(*B, m_a)``, ``params (*P, M, k)`` ->
+    ``(*broadcast(B, P), M, dim)`` (see the module's Convention). No host reads.
     """
     h = _local(homogeneous(control_points, weights), knot_vectors, degrees, params, None)
-    return h[..., :-1] / h[..., -1:]
+    num, den = h.split([h.shape[-1] - 1, 1], dim=-1)
+    return num / den
 
 
 def derivatives(
@@ -157,9 +341,9 @@ def derivatives(
 ) -> Tensor:
     """All mixed partial derivatives up to ``order`` in each direction.
 
-    Shapes: ``params (..., M, k)`` -> ``(..., M, order + 1, ... (k times), dim)``;
+    Shapes: ``params (*P, M, k)`` -> ``(*broadcast(B, P), M, order + 1, ... (k times), dim)``;
     entry ``[..., a, b, :]`` of a surface is the derivative ``a`` times in u and ``b``
-    times in v; ``[..., 0, 0, :]`` is the point itself.
+    times in v; ``[..., 0, 0, :]`` is the point itself. No host reads.
     """
     return homogeneous_derivatives_to_points(
         _local(homogeneous(control_points, weights), knot_vectors, degrees, params, order), len(degrees)
@@ -169,29 +353,222 @@ def derivatives(
 def derivatives_from_homogeneous(
     Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int
 ) -> Tensor:
-    """:func:`derivatives` from homogeneous control points ``Pw (n_1..n_k, dim + 1)``
+    """:func:`derivatives` from homogeneous control points ``Pw (*B, n_1..n_k, dim + 1)``
     formed once by the caller (iterative solvers evaluate the same spline many times)."""
     return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order), len(degrees))
 
 
-def _mode_products(Pw: Tensor, matrices: Sequence[Tensor]) -> Tensor:
-    """``Pw (n_1..n_k, D)`` times ``matrices[a] (R_a, n_a)`` along each axis -> ``(D, R_1..R_k)``.
+# ---- grids -------------------------------------------------------------------------------------
 
-    The homogeneous channel goes first so that every product is one large GEMM on a
-    reshaped view: each leading axis as a left product batched over what precedes it,
-    the last axis as a single right product ``X @ B_k^T``. The result stays
-    channel-first; callers divide and move the channel last (a free view).
+def uniform_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
+    """``count`` evenly spaced parameters over the domain ``[knots[p], knots[n]]``, ends exact.
+
+    Shapes: ``knots (m,)`` -> ``(count,)``; ``knots (*B, m)`` -> ``(*B, count)``. Computed on
+    the device from the (detached) end knots with ``torch.linspace``'s own formula
+    (from the start for the first half, from the end for the second), so nothing is read
+    back to the host and the last sample is the domain end exactly.
     """
-    X = torch.movedim(Pw, -1, 0)  # (D, n_1, ..., n_k)
-    lead = [Pw.shape[-1]]
-    batch = Pw.shape[-1]
-    for B in matrices[:-1]:
-        X = torch.matmul(B, X.reshape(batch, B.shape[1], -1))  # (batch, R_a, rest)
-        lead.append(B.shape[0])
-        batch *= B.shape[0]
-    B = matrices[-1]
-    X = X.reshape(-1, B.shape[1]) @ B.transpose(0, 1)
-    return X.reshape(tuple(lead) + (B.shape[0],))
+    k = knots.detach()
+    a, b = k[..., degree : degree + 1], k[..., n_ctrl : n_ctrl + 1]
+    if count == 1:
+        return a
+    i = torch.arange(count, dtype=k.dtype, device=k.device)
+    step = (b - a) / (count - 1)
+    return torch.where(i < count / 2, a + step * i, b - step * (count - 1 - i))
+
+
+def _kron_channels(matrix: Tensor, D: int) -> Tensor:
+    """``B^T kron I_D``: ``(*, R, n)`` -> ``(*, n * D, R * D)``, so that a channel-last
+    ``(rows, n * D)`` view times it contracts ``n`` and keeps the channels last."""
+    eye = torch.eye(D, dtype=matrix.dtype, device=matrix.device)
+    BT = matrix.transpose(-1, -2)  # (*, n, R)
+    lead = BT.shape[:-2]
+    n, R = BT.shape[-2:]
+    return (BT[..., :, None, :, None] * eye[:, None, :]).reshape(lead + (n * D, R * D))
+
+
+def _grid_matrix(kv: Tensor, p: int, n: int, axis: Tensor | int, order: int) -> Tensor:
+    """Stacked basis matrix ``((o + 1) R, n)`` (or ``(*B, (o + 1) R, n)``) of one direction."""
+    u = uniform_axis(kv, p, n, axis) if isinstance(axis, int) else axis
+    m = basis_matrix(kv, p, n, u, order)
+    if order:
+        m = m.reshape(m.shape[:-3] + (-1, m.shape[-1]))
+    return m
+
+
+def _grid_operators(knot_vectors, degrees, sizes, axes, order: int, D: int, channel_rows: bool = False) -> list[Tensor]:
+    """The per-direction operators of a grid: basis matrices, the last one as ``B^T kron I_D``
+    (or, with ``channel_rows``, ``I_D kron B^T`` for a net laid out ``(..., D, n_k)``).
+
+    Cached on (knots, axis tensor) or (knots, sample count) when nothing needs gradients.
+    """
+    k = len(degrees)
+    ops = []
+    for a in range(k):
+        last = a == k - 1 and D <= _KRON_MAX_CHANNELS
+        key_tensors = [knot_vectors[a]] + ([] if isinstance(axes[a], int) else [axes[a]])
+        extra = ("grid", degrees[a], sizes[a], order, axes[a] if isinstance(axes[a], int) else -1,
+                 D if last else 0, channel_rows and last)
+
+        def build(a=a, last=last):
+            m = _grid_matrix(knot_vectors[a], degrees[a], sizes[a], axes[a], order)
+            if not last:
+                return m
+            if channel_rows:
+                eye = torch.eye(D, dtype=m.dtype, device=m.device)
+                BT = m.transpose(-1, -2)  # (n, R); K[(c, j), (c', s)] = [c == c'] B[s, j]
+                return (eye[:, None, :, None] * BT[None, :, None, :]).reshape(D * BT.shape[0], D * BT.shape[1])
+            return _kron_channels(m, D)
+
+        ops.append(basis_cache.get(key_tensors, extra, build))
+    return ops
+
+
+def _grid_products(Pw: Tensor, ops: Sequence[Tensor], k: int, kron: bool) -> Tensor:
+    """``Pw (*B, n_1..n_k, D)`` through the direction operators -> ``(*B, R_1..R_k, D)``.
+
+    ``ops[a]`` is ``(R_a, n_a)`` or per element ``(*B, R_a, n_a)``; with ``kron`` the last
+    is ``B_k^T kron I_D``, ``(n_k D, R_k D)`` (or per element). Each direction is one GEMM
+    (batched when it must be).
+    """
+    B = batch_shape(Pw, k)
+    Bt = math.prod(B)
+    sizes = Pw.shape[len(B) : len(B) + k]
+    D = Pw.shape[-1]
+    last = ops[-1]
+    R = [0] * k
+    if kron:
+        if last.ndim == 2:
+            X = Pw.reshape(-1, sizes[-1] * D).mm(last)
+        else:
+            X = torch.bmm(Pw.reshape(Bt, -1, sizes[-1] * D), last.reshape(Bt, sizes[-1] * D, -1))
+        R[-1] = last.shape[-1] // D
+    else:  # wide channels: (rows, n_k, D) -> (rows, R_k, D) by a broadcast product
+        mat = last if last.ndim == 2 else last.reshape(Bt, 1, *last.shape[-2:])
+        X = torch.matmul(mat, Pw.reshape(Bt, -1, sizes[-1], D))
+        R[-1] = last.shape[-2]
+    for a in range(k - 2, -1, -1):
+        P = math.prod(sizes[:a])
+        Q = math.prod(R[a + 1 :]) * D
+        mat = ops[a]
+        if mat.ndim == 2:
+            if Bt * P == 1:
+                X = mat.mm(X.reshape(sizes[a], Q))
+            else:
+                X = torch.matmul(mat, X.reshape(Bt * P, sizes[a], Q))
+        elif P == 1:
+            X = torch.bmm(mat.reshape(Bt, *mat.shape[-2:]), X.reshape(Bt, sizes[a], Q))
+        else:
+            X = torch.matmul(mat.reshape(Bt, 1, *mat.shape[-2:]), X.reshape(Bt, P, sizes[a], Q))
+        R[a] = mat.shape[-2]
+    return X.reshape(B + tuple(R) + (D,))
+
+
+class _SurfaceGrid(torch.autograd.Function):
+    """A rational surface on a grid through fixed basis operators, with a hand-written backward.
+
+    ``cp (n_u, *mid, n_v, dim)``, ``w (n_u, *mid, n_v)``, ``Bu (R, n_u)``, ``K = I_D kron B_v^T``
+    ``(D n_v, D S)`` -> ``(R, *mid, S, dim)``; ``mid`` is ``()`` or a batch axis ridden along.
+    Forward: ``Pw = (w P, w)`` laid out ``(n_u, *mid, D, n_v)``, two GEMMs, and a division
+    of whole channel rows (contiguous, so it vectorises; the result is returned as a
+    transposed view, channel last). Backward (one autograd node instead of a dozen, which
+    is what a small grid's backward costs on a GPU): with ``out = num / den``,
+    ``dnum = G / den``, ``dden = -sum(G out) / den``, the two GEMMs transposed, and the
+    product rule of ``(w P, w)``. Gradients reach ``cp`` and ``w`` only (the operators come
+    from the basis cache, which holds no gradients), once.
+    """
+
+    @staticmethod
+    def forward(ctx, cp, w, Bu, K):
+        wT = w.unsqueeze(-2)
+        Pw = torch.cat([cp.transpose(-1, -2) * wT, wT], dim=-2)  # (n_u, *mid, D, n_v)
+        D = Pw.shape[-2]
+        X = Pw.reshape(-1, K.shape[0]).mm(K)  # (n_u * mid, D * S): contracts v
+        if X.shape[0] != Bu.shape[1]:
+            X = X.reshape(Bu.shape[1], -1)
+        H = Bu.mm(X)  # (R, mid * D * S): contracts u
+        H = H.view((Bu.shape[0],) + cp.shape[1:-2] + (D, K.shape[1] // D))
+        num, den = H.split([D - 1, 1], dim=-2)
+        out = num / den  # (R, *mid, dim, S)
+        ctx.save_for_backward(cp, w, Bu, K, out, den)
+        return out.transpose(-1, -2)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, G):
+        cp, w, Bu, K, out, den = ctx.saved_tensors
+        gnum = G.transpose(-1, -2) / den  # (R, *mid, dim, S)
+        gden = (gnum * out).sum(-2, keepdim=True).neg_()
+        dH = torch.cat([gnum, gden], dim=-2).reshape(Bu.shape[0], -1)
+        dX = Bu.t().mm(dH)  # (n_u, mid * D * S)
+        dPw = dX.reshape(-1, K.shape[1]).mm(K.t()).reshape(cp.shape[:-2] + (cp.shape[-1] + 1, cp.shape[-2]))
+        gP, gw = dPw.split([cp.shape[-1], 1], dim=-2)  # (n_u, *mid, dim, n_v), (n_u, *mid, 1, n_v)
+        dcp = (gP * w.unsqueeze(-2)).transpose(-1, -2) if ctx.needs_input_grad[0] else None
+        dw = (gP * cp.transpose(-1, -2)).sum(-2) + gw.squeeze(-2) if ctx.needs_input_grad[1] else None
+        return dcp, dw, None, None
+
+
+def _folded_products(Pw: Tensor, ops: Sequence[Tensor], sizes: Sequence[int], folded: bool) -> Tensor:
+    """Shared operators on ``Pw (n_1, [Bt,] n_2..n_k, D)`` (the batch, if any, behind the first
+    direction, so that every direction is one GEMM over the whole batch) ->
+    ``(R_1, [Bt,] R_2..R_k, D)``; ``ops[-1]`` is ``B_k^T kron I_D``."""
+    k = len(sizes)
+    D = Pw.shape[-1]
+    X = Pw.reshape(-1, sizes[-1] * D).mm(ops[-1])
+    R = [0] * k
+    R[-1] = ops[-1].shape[-1] // D
+    lead = Pw.shape[: 2 if folded else 1]
+    for a in range(k - 2, 0, -1):
+        P = math.prod(lead) * math.prod(sizes[1:a])
+        X = torch.matmul(ops[a], X.reshape(P, sizes[a], -1))
+        R[a] = ops[a].shape[0]
+    X = ops[0].mm(X.reshape(sizes[0], -1))
+    R[0] = ops[0].shape[0]
+    return X.reshape((R[0],) + tuple(lead[1:]) + tuple(R[1:]) + (D,))
+
+
+def _grid(control_points, weights, knot_vectors, degrees, axes, order: int) -> Tensor:
+    k = len(degrees)
+    B = batch_shape(control_points, k)
+    nb = len(B)
+    sizes = tuple(control_points.shape[nb : nb + k])
+    D = control_points.shape[-1] + 1
+    kron = D <= _KRON_MAX_CHANNELS
+    fixed = not any(kv.requires_grad for kv in knot_vectors) and not any(
+        isinstance(ax, Tensor) and ax.requires_grad for ax in axes)
+    per_element = _per_element(knot_vectors) or any(isinstance(ax, Tensor) and ax.ndim > 1 for ax in axes)
+    if kron and k == 2 and order == 0 and fixed and not per_element:
+        # The hot path of a fit: fixed basis, a surface, one node for autograd.
+        ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D, channel_rows=True)
+        cp, w = control_points, weights
+        if B:
+            Bt = math.prod(B)
+            cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
+            w = w.reshape((Bt,) + sizes).movedim(0, 1)
+        out = _SurfaceGrid.apply(cp, w, ops[0], ops[1])  # (R, [Bt,] S, dim)
+        return out.movedim(1, 0).reshape(B + out.shape[:1] + out.shape[2:]) if B else out
+    ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D)
+    if kron and k >= 2 and all(op.ndim == 2 for op in ops):
+        # Shared operators: the batch rides behind the first direction (a cheap permuted
+        # copy of the control net), and every direction is one GEMM for the whole batch.
+        Bt = math.prod(B)
+        cp, w = control_points, weights
+        if B:
+            cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
+            w = w.reshape((Bt,) + sizes).movedim(0, 1)
+        h = _folded_products(homogeneous(cp, w), ops, sizes, bool(B))
+        if B:
+            h = h.movedim(1, 0).reshape(B + h.shape[:1] + h.shape[2:])
+    else:
+        h = _grid_products(homogeneous(control_points, weights), ops, k, kron)
+    if order == 0:
+        num, den = h.split([D - 1, 1], dim=-1)
+        return num / den
+    # (*B, (o+1) R_1, ..., (o+1) R_k, D) -> (*B, R_1..R_k, o..o, D)
+    lengths = h.shape[nb : nb + k]
+    h = h.reshape(B + sum(((order + 1, r // (order + 1)) for r in lengths), ()) + (D,))
+    perm = list(range(nb)) + [nb + 2 * a + 1 for a in range(k)] + [nb + 2 * a for a in range(k)] + [nb + 2 * k]
+    return homogeneous_derivatives_to_points(h.permute(perm), k)
 
 
 def evaluate_grid(
@@ -204,21 +581,27 @@ def evaluate_grid(
 ) -> Tensor:
     """Points (or derivatives) on the tensor grid ``axes[0] x axes[1] x ...``.
 
-    Shapes: ``axes[a] (R_a,)`` -> ``(R_1, ..., R_k, dim)``; with ``order > 0``,
-    ``(R_1, ..., R_k, order + 1, ... (k times), dim)`` laid out as :func:`derivatives`.
+    Shapes: ``axes[a] (R_a,)`` (shared) or ``(*B, R_a)`` (per element, with per-element
+    knots) -> ``(*B, R_1, ..., R_k, dim)``; with ``order > 0``,
+    ``(*B, R_1, ..., R_k, order + 1, ... (k times), dim)`` laid out as :func:`derivatives`.
+    No host reads; the basis matrices are cached while knots and axes stay unchanged.
     """
-    k = len(degrees)
-    Pw = homogeneous(control_points, weights)
-    sizes = control_points.shape[:k]
-    if order == 0:
-        matrices = [basis_matrix(knot_vectors[a], degrees[a], sizes[a], axes[a]) for a in range(k)]
-        h = _mode_products(Pw, matrices)
-        return torch.movedim(h[:-1] / h[-1:], 0, -1)
-    # Stack the derivative orders into the rows: B_a ((o+1) * R_a, n_a).
-    mats = [basis_matrix(knot_vectors[a], degrees[a], sizes[a], axes[a], order) for a in range(k)]
-    h = _mode_products(Pw, [m.reshape(-1, m.shape[-1]) for m in mats])
-    lengths = [len(ax) for ax in axes]
-    h = h.reshape([Pw.shape[-1]] + sum(([order + 1, r] for r in lengths), []))
-    # (D, o, R_1, o, R_2, ...) -> (R_1, ..., R_k, o, ..., o, D)
-    perm = [2 * a + 2 for a in range(k)] + [2 * a + 1 for a in range(k)] + [0]
-    return homogeneous_derivatives_to_points(h.permute(perm), k)
+    return _grid(control_points, weights, knot_vectors, degrees, list(axes), order)
+
+
+def sample(
+    control_points: Tensor,
+    weights: Tensor,
+    knot_vectors: Sequence[Tensor],
+    degrees: Sequence[int],
+    resolution: Sequence[int],
+    order: int = 0,
+) -> Tensor:
+    """:func:`evaluate_grid` on ``resolution[a]`` evenly spaced parameters per direction
+    (:func:`uniform_axis`, domain ends included): ``(*B, R_1, ..., R_k, dim)``.
+
+    The fast path of a fit: with fixed knots the basis operators come from the cache
+    (keyed on the knot tensors and the resolution), and a surface costs two GEMMs and
+    a division, about ten aten operations, whatever the control points.
+    """
+    return _grid(control_points, weights, knot_vectors, degrees, [int(r) for r in resolution], order)

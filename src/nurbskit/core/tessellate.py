@@ -32,6 +32,7 @@ from typing import NamedTuple, Sequence
 import torch
 
 from ..errors import NurbskitError
+from .surface import limit_normals
 
 Tensor = torch.Tensor
 
@@ -74,13 +75,13 @@ def tessellate(surface, resolution: int | Sequence[int] = 32) -> Tessellation:
     """Vertices, triangles and vertex normals of a surface on a uniform parametric grid.
 
     Args:
-        surface: a 3-D :class:`NURBSSurface`.
+        surface: a 3-D :class:`NURBSSurface`, or a batch of them.
         resolution: ``R`` or ``(R, S)`` samples per direction, each ``>= 2``, ends included.
 
     Returns:
-        ``Tessellation(vertices (R*S, 3), faces (2(R-1)(S-1), 3) int64, normals (R*S, 3))``;
-        dtype and device follow the surface (see the module docstring for the
-        conventions).
+        ``Tessellation(vertices (*B, R*S, 3), faces (2(R-1)(S-1), 3) int64, normals (*B, R*S, 3))``;
+        a batch shares its faces. dtype and device follow the surface (see the module
+        docstring for the conventions).
 
     Example:
         >>> import torch
@@ -106,70 +107,53 @@ def _check_surface(surface, name: str) -> None:
 
 
 def _tessellate_axes(surface, u: Tensor, v: Tensor) -> Tessellation:
-    """:func:`tessellate` on the tensor grid of increasing parameter arrays ``u (R,)``, ``v (S,)``."""
-    R, S = len(u), len(v)
-    D = surface.evaluate_grid(u, v, order=1)  # (R, S, 2, 2, 3)
-    vertices = D[:, :, 0, 0].reshape(-1, 3)
-    Su, Sv = D[:, :, 1, 0].reshape(-1, 3), D[:, :, 0, 1].reshape(-1, 3)
-    n = torch.linalg.cross(Su, Sv, dim=-1)
+    """:func:`tessellate` on the tensor grid of increasing parameter arrays ``u (*, R)``, ``v (*, S)``."""
+    R, S = u.shape[-1], v.shape[-1]
+    B = surface.batch_shape
+    D = surface.evaluate_grid(u, v, order=1, extrapolate=True)  # (*B, R, S, 2, 2, 3)
+    vertices = D[..., 0, 0, :].reshape(B + (R * S, 3))
+    at_u, at_v = surface._upper_edges(u.reshape(u.shape[:-1] + (-1, 1)), v.reshape(v.shape[:-1] + (1, -1)), 2)
+    n = limit_normals(D[..., 1, 0, :], D[..., 0, 1, :], D[..., 1, 1, :], at_u, at_v).reshape(B + (R * S, 3))
     faces = grid_faces(R, S, device=vertices.device)
-
     with torch.no_grad():
         size = n.norm(dim=-1)
+        scale = size.amax(dim=-1, keepdim=True)
         # sqrt(eps) relative: rows next to a pole still have |n| ~ 1/R of the largest.
-        degenerate = size <= torch.finfo(n.dtype).eps ** 0.5 * size.max()
-    if bool(degenerate.any()):
-        n = _repair_normals(surface, n, Su, Sv, u, v, degenerate, vertices, faces)
+        missing = size <= torch.finfo(n.dtype).eps ** 0.5 * scale
+    if bool(missing.any()):  # one host read: only surfaces whose limit normal vanishes go on
+        n = _repair_normals(n, missing, scale, vertices, faces, R, S)
     return Tessellation(vertices, faces, _unit(n))
 
 
-def _repair_normals(surface, n, Su, Sv, u, v, degenerate, vertices, faces) -> Tensor:
-    """Replace degenerate ``S_u x S_v`` by their limit from inside, or by face normals."""
-    R, S = len(u), len(v)
-    idx = torch.nonzero(degenerate).reshape(-1)
-    ui, vj = u[idx // S], v[idx % S]
-    D2 = surface.derivatives(torch.stack([ui, vj], dim=-1), order=2)  # (K, 3, 3, 3)
-    su, sv, suv = D2[:, 1, 0], D2[:, 0, 1], D2[:, 1, 1]
-    (u0, u1), (v0, v1) = surface.domain
-    one = torch.ones_like(ui)
-    sign_v = torch.where(vj >= v1, -one, one)[:, None]  # inside lies below v_max, above elsewhere
-    sign_u = torch.where(ui >= u1, -one, one)[:, None]
-    with torch.no_grad():
-        su_small = su.norm(dim=-1) <= sv.norm(dim=-1)
-    limit = torch.where(
-        su_small[:, None],
-        sign_v * torch.linalg.cross(suv, sv, dim=-1),
-        sign_u * torch.linalg.cross(su, suv, dim=-1),
-    )
-    # Fallback: area-weighted mean of the surrounding face normals ((b - a) x (c - a) has
-    # twice the area as its length, so a plain sum weights by area).
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    fn = torch.linalg.cross(b - a, c - a, dim=-1)
-    around = torch.zeros_like(vertices).index_add(0, faces.reshape(-1), fn.repeat_interleave(3, dim=0))
-    with torch.no_grad():
-        scale = n.norm(dim=-1).max()
-        ok = limit.norm(dim=-1) > torch.finfo(n.dtype).eps ** 0.5 * scale
-    repaired = torch.where(ok[:, None], _unit(limit), _unit(around[idx]))
-    n = n.index_copy(0, idx, repaired * scale)
-    return _fill_from_neighbours(n.reshape(R, S, 3), scale).reshape(-1, 3)
+def _repair_normals(n, missing, scale, vertices, faces, R: int, S: int) -> Tensor:
+    """Where even the limit normal vanishes: the area-weighted mean of the surrounding face
+    normals, then the grid neighbours' mean. ``n, vertices (*B, R S, 3)``, ``missing (*B, R S)``."""
+    a, b, c = (vertices[..., faces[:, i], :] for i in range(3))
+    fn = torch.linalg.cross(b - a, c - a, dim=-1)  # |(b - a) x (c - a)| is twice the area: a plain sum weights by area
+    spread = fn.unsqueeze(-2).expand(fn.shape[:-1] + (3, 3)).reshape(fn.shape[:-2] + (-1, 3))
+    around = torch.zeros_like(vertices).index_add(-2, faces.reshape(-1), spread)
+    n = torch.where(missing.unsqueeze(-1), _unit(around) * scale.unsqueeze(-1), n)
+    return _fill_from_neighbours(n.reshape(n.shape[:-2] + (R, S, 3)), scale).reshape(n.shape)
 
 
 def _fill_from_neighbours(n: Tensor, scale: Tensor) -> Tensor:
     """Give vertices still without a normal the mean of their grid neighbours' normals.
 
-    ``n (R, S, 3)``. Needed where every surrounding face has zero area too (a corner of
-    the grid touches one triangle only, which a collapsed edge may flatten). Repeats
-    until each such vertex has a neighbour with a normal (at most ``R + S`` rounds).
+    ``n (*B, R, S, 3)``, ``scale (*B, 1)``. Needed where every surrounding face has zero area
+    too (a corner of the grid touches one triangle only, which a collapsed edge may
+    flatten). Repeats until each such vertex has a neighbour with a normal (at most
+    ``R + S`` rounds).
     """
-    R, S, _ = n.shape
+    R, S = n.shape[-3], n.shape[-2]
+    limit = torch.finfo(n.dtype).eps ** 0.5 * scale.unsqueeze(-1)
     for _ in range(R + S):
         with torch.no_grad():
-            missing = n.norm(dim=-1) <= torch.finfo(n.dtype).eps ** 0.5 * scale
+            missing = n.norm(dim=-1) <= limit
         if not bool(missing.any()):
             break
         unit = torch.where(missing[..., None], torch.zeros_like(n), _unit(n))
-        padded = torch.nn.functional.pad(unit.permute(2, 0, 1), (1, 1, 1, 1)).permute(1, 2, 0)
-        around = sum(padded[1 + di : 1 + di + R, 1 + dj : 1 + dj + S] for di in (-1, 0, 1) for dj in (-1, 0, 1))
+        padded = torch.nn.functional.pad(unit.movedim(-1, -3), (1, 1, 1, 1)).movedim(-3, -1)
+        around = sum(padded[..., 1 + di : 1 + di + R, 1 + dj : 1 + dj + S, :] for di in (-1, 0, 1) for dj in (-1, 0, 1))
         n = torch.where(missing[..., None], around, n)
     return n
 
@@ -204,6 +188,7 @@ def tessellate_adaptive(surface, tolerance: float, *, max_resolution: int = 1025
         torch.Size([34, 3])
     """
     _check_surface(surface, "tessellate_adaptive")
+    surface.require_single("tessellate_adaptive")
     if not tolerance > 0:
         raise NurbskitError(f"tessellate_adaptive: tolerance must be > 0, got {tolerance!r}")
     if max_resolution < 2:
@@ -214,10 +199,10 @@ def tessellate_adaptive(surface, tolerance: float, *, max_resolution: int = 1025
         while True:
             u, v = axes
             mu, mv = (u[1:] + u[:-1]) / 2, (v[1:] + v[:-1]) / 2
-            P = fixed.evaluate_grid(u, v)  # (R, S, 3)
-            along_u = (fixed.evaluate_grid(mu, v) - (P[1:] + P[:-1]) / 2).norm(dim=-1)  # (R-1, S)
-            along_v = (fixed.evaluate_grid(u, mv) - (P[:, 1:] + P[:, :-1]) / 2).norm(dim=-1)  # (R, S-1)
-            diagonal = (fixed.evaluate_grid(mu, mv) - (P[1:, 1:] + P[:-1, :-1]) / 2).norm(dim=-1)  # (R-1, S-1)
+            P = fixed.evaluate_grid(u, v, extrapolate=True)  # (R, S, 3)
+            along_u = (fixed.evaluate_grid(mu, v, extrapolate=True) - (P[1:] + P[:-1]) / 2).norm(dim=-1)  # (R-1, S)
+            along_v = (fixed.evaluate_grid(u, mv, extrapolate=True) - (P[:, 1:] + P[:, :-1]) / 2).norm(dim=-1)
+            diagonal = (fixed.evaluate_grid(mu, mv, extrapolate=True) - (P[1:, 1:] + P[:-1, :-1]) / 2).norm(dim=-1)
             split_u = along_u.amax(dim=1) > tolerance
             split_v = along_v.amax(dim=0) > tolerance
             # A diagonal's deviation mixes both directions' sag and the twist; splitting

@@ -6,16 +6,17 @@ from .spline import TensorSpline
 
 
 class NURBSVolume(TensorSpline):
-    """A rational trivariate B-spline.
+    """A rational trivariate B-spline, or a batch of them.
 
     Args:
-        control_points: ``(n_u, n_v, n_w, dim)``; ``dim = 1`` for a scalar field.
+        control_points: ``(*B, n_u, n_v, n_w, dim)``; ``dim = 1`` for a scalar field.
         degrees: ``(p, q, r)``.
-        knot_vectors: three 1-D knot vectors; default clamped uniform on [0, 1].
-        weights: ``(n_u, n_v, n_w)`` positive; default ones.
+        knot_vectors: three knot vectors, each ``(m,)`` shared or ``(*B, m)`` per element;
+            default clamped uniform on [0, 1].
+        weights: ``(*B, n_u, n_v, n_w)`` positive; default ones.
 
-    Convention: ``evaluate`` takes ``(..., M, 3)`` and returns ``(..., M, dim)``;
-    ``evaluate_grid(u, v, w)`` returns ``(R, S, T, dim)`` by three mode products.
+    Convention: ``evaluate`` takes ``(*P, M, 3)`` and returns ``(*broadcast(B, P), M, dim)``;
+    ``evaluate_grid(u, v, w)`` returns ``(*B, R, S, T, dim)`` by three mode products.
 
     Example:
         >>> import torch
