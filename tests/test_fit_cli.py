@@ -58,6 +58,14 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
     assert main(args + ["--overwrite"]) == 0
 
 
+def run(argv) -> int:
+    """main's exit code, whether argparse (SystemExit) or the command refused the input."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
 @pytest.mark.parametrize(
     "extra, message",
     [
@@ -65,15 +73,19 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
         (["--ctrl", "axb"], "--ctrl"),
         (["--ctrl", "2x9"], "ctrl"),
         (["--resolution", "1x5"], "--resolution"),
-        (["--iters", "-4"], "--iters"),
+        (["--iters", "-4"], "--iters: expected an integer in [0, 1000000], got -4"),
+        (["--iters", "10000000"], "--iters: expected an integer in [0, 1000000]"),
         (["--pipeline", "SC"], "supervised"),
         (["--device", "tpu"], "--device"),
-        (["--lr", "0"], "--lr"),
-        (["--threads", "0"], "--threads"),
+        (["--lr", "0"], "--lr: expected a number in (0, 10], got 0"),
+        (["--lr", "1e30"], "--lr: expected a number in (0, 10], got 1e30"),
+        (["--threads", "0"], "--threads: expected an integer in [1, 4096], got 0"),
+        (["--max-points", "-1"], "--max-points"),
+        (["--dtype", "float16"], "invalid choice"),
     ],
 )
 def test_bad_options_are_one_line_errors(cloud, tmp_path, capsys, extra, message):
-    rc = main(["fit", str(cloud), "--out", str(tmp_path / "o"), "--quiet"] + extra)
+    rc = run(["fit", str(cloud), "--out", str(tmp_path / "o"), "--quiet"] + extra)
     err = capsys.readouterr().err
     assert rc == 2
     assert message in err and "Traceback" not in err and err.count("\n") == 1
