@@ -59,9 +59,12 @@ def device_and_dtype(args) -> tuple:
 
 
 def _range_text(low, high, low_open=False) -> str:
+    def fmt(x):
+        return str(x) if isinstance(x, int) else f"{x:g}"
+
     if high is None:
-        return f"> {low:g}" if low_open else f">= {low:g}"
-    return f"in {'(' if low_open else '['}{low:g}, {high:g}]"
+        return f"> {fmt(low)}" if low_open else f">= {fmt(low)}"
+    return f"in {'(' if low_open else '['}{fmt(low)}, {fmt(high)}]"
 
 
 def int_in(low: int, high: int | None = None):
