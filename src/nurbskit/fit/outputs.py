@@ -40,7 +40,8 @@ def _floats(d: dict) -> dict:
 def fit_report(result: FitResult, *, distances: bool = False) -> dict:
     """The numbers of a fit, JSON-ready.
 
-    Keys: ``pipeline``, ``iterations``, ``seconds``, ``loop_seconds``,
+    Keys: ``pipeline``, ``dtype`` and ``device`` (those of the fit, the input's),
+    ``iterations``, ``seconds``, ``loop_seconds``,
     ``seconds_per_iteration``, ``final_loss`` and ``final_parts`` (fit units),
     ``closed_v``, ``metrics`` (input units) and ``metrics_normalized`` (the input and
     surface scaled to a unit bounding-box diagonal: the thesis's columns become
@@ -63,6 +64,8 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
         "pipeline": cfg.pipeline,
         "supervised": cfg.supervised,
         "points": int(pts.shape[0]),
+        "dtype": str(result.surface.dtype).removeprefix("torch."),
+        "device": str(result.surface.control_points.device),
         "control_points": list(s.sizes),
         "degrees": list(s.degrees),
         "topology": result.topology.as_dict(),
