@@ -47,6 +47,7 @@ def test_volume_command_writes_everything(tmp_path, drawings, capsys):
     assert report["config"]["control_size"] == [10, 10, 10] and report["config"]["loss"] == "silhouette"
     assert set(report["iou"]) == {"front", "left", "top"} and min(report["iou"].values()) > 0.8
     assert report["seconds"]["total"] > 0 and report["empty"] is False
+    assert report["cost_history"][-1] < report["cost_history"][0]  # the loss went down
     volume = load(out / "volume.json")
     assert volume.kind == "volume" and volume.control_points.shape == (10, 10, 10, 1)
     mesh = trimesh.load(out / "mesh.obj", process=False, force="mesh")

@@ -43,6 +43,7 @@ def test_consistent_silhouettes_are_reproduced(sphere_box):
     d = sphere_box
     result = fit(d, loss="silhouette", **SMALL)
     assert result.hull_iou == {"front": 1.0, "left": 1.0, "top": 1.0}  # consistent by construction
+    assert result.costs["total"] < result.costs["initial_total"]
     for view, score in result.iou.items():
         assert score >= 0.95, (view, result.iou)
 
@@ -61,6 +62,7 @@ def test_inconsistent_set_gets_close_to_the_visual_hull(paper_set):
     assert hull["top"] < 0.99  # no solid matches all three: the hull misses part of the heart
     result = fit(d, loss="silhouette", **SMALL)
     assert result.hull_iou == hull
+    assert result.costs["total"] < result.costs["initial_total"]
     for view in hull:
         assert result.iou[view] >= 0.9 * hull[view], (view, result.iou, hull)
     assert not result.mesh.is_empty

@@ -42,7 +42,8 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
 
     Keys: ``pipeline``, ``dtype`` and ``device`` (those of the fit, the input's),
     ``iterations``, ``seconds``, ``loop_seconds``,
-    ``seconds_per_iteration``, ``final_loss`` and ``final_parts`` (fit units),
+    ``seconds_per_iteration``, ``initial_loss`` (of the first gradient iteration),
+    ``final_loss`` and ``final_parts`` (fit units),
     ``closed_v``, ``metrics`` (input units) and ``metrics_normalized`` (the input and
     surface scaled to a unit bounding-box diagonal: the thesis's columns become
     comparable across shapes), and for supervised fits ``rms`` and
@@ -74,6 +75,7 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
         "seconds": float(result.seconds),
         "loop_seconds": float(result.loop_seconds),
         "seconds_per_iteration": float(result.seconds_per_iteration),
+        "initial_loss": float(result.history[0]["loss"]) if result.history else None,
         "final_loss": float(last.get("loss", float("nan"))) if last else None,
         "final_parts": _floats(last.get("parts", {})) if last else {},
         "metrics": _floats(m),
