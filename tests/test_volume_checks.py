@@ -137,14 +137,15 @@ def test_drawings_as_a_mapping_or_a_sequence():
 def test_progress_comes_from_the_objective():
     calls = []
     values = iter([3.0, 2.0, 2.5, 1.0])
-    recorder = _Recorder(lambda: torch.tensor(next(values)), 5, lambda *a: calls.append(a))
+    fresh = iter([True, True, True, False])
+    recorder = _Recorder(lambda: (torch.tensor(next(values)), next(fresh)), 5, lambda *a: calls.append(a))
     recorder()  # the start: recorded, not reported
     recorder.mark()
     recorder()  # first evaluation of iteration 1: the iterate after one step
     recorder()  # a line-search trial: counted, not recorded
     recorder.mark()
-    recorder()
-    assert recorder.history == [3.0, 2.0, 1.0] and recorder.evaluations == 4
+    recorder()  # remembered, not computed: recorded, not counted
+    assert recorder.history == [3.0, 2.0, 1.0] and recorder.evaluations == 3
     assert calls == [("fit", 1, 5, 2.0), ("fit", 2, 5, 1.0)]
 
 

@@ -161,13 +161,14 @@ def visual_hull_iou(drawings: dict, resolution: int) -> dict:
 class _Recorder:
     """Wraps the objective: counts evaluations and records the cost at each iterate.
 
-    :meth:`mark` is called before each L-BFGS iteration; the first evaluation after it
-    is the cost at the current iterate (after ``k`` iterations), recorded and reported
-    to the callback. Progress is thus read from the objective itself, not from the
-    optimiser's internal state.
+    ``objective()`` returns ``(cost, evaluated)``, ``evaluated`` False when the cost was
+    remembered rather than computed. :meth:`mark` is called before each L-BFGS
+    iteration; the first call after it gives the cost at the current iterate (after
+    ``k`` iterations), recorded and reported to the callback. Progress is thus read
+    from the objective itself, not from the optimiser's internal state.
     """
 
-    def __init__(self, objective: Callable[[], Tensor], total: int, callback: ProgressCallback | None):
+    def __init__(self, objective: Callable[[], tuple[Tensor, bool]], total: int, callback: ProgressCallback | None):
         self.objective = objective
         self.total = total
         self.callback = callback
@@ -179,8 +180,8 @@ class _Recorder:
         self._marked = True
 
     def __call__(self) -> Tensor:
-        cost = self.objective()
-        self.evaluations += 1
+        cost, evaluated = self.objective()
+        self.evaluations += int(evaluated)
         if self._marked:
             self._marked = False
             self.record(float(cost.detach()))
@@ -276,29 +277,45 @@ def fit_silhouettes(
             shape = silhouette_cost(f, planes, cfg.isovalue, cfg.sharpness)
         return cfg.shape_weight * shape + cfg.smooth_weight * smooth, shape, smooth, f
 
+    trained = (values, log_weights)
+    memo: list = []
+
+    def cost_with_gradient() -> tuple[Tensor, bool]:
+        # Each L-BFGS step starts by evaluating the point its previous line search
+        # accepted, which that search has usually just evaluated: remembered, it is not
+        # computed twice (bit-identical parameters, so the same cost and gradient).
+        point = [t.detach() for t in trained]
+        if memo and all(torch.equal(a, b) for a, b in zip(point, memo[0])):
+            for t, g in zip(trained, memo[2]):
+                t.grad = g.clone()
+            return memo[1], False
+        for t in trained:
+            t.grad = None
+        total = costs()[0]
+        total.backward()
+        memo[:] = [[p.clone() for p in point], total.detach(), [t.grad.clone() for t in trained]]
+        return total.detach(), True
+
     # history[0]: the initial cost; history[k]: the cost after L-BFGS iteration k.
-    recorder = _Recorder(lambda: costs()[0], cfg.iterations, callback)
+    recorder = _Recorder(cost_with_gradient, cfg.iterations, callback)
     iterations_run = 0
     if cfg.iterations > 0:
         # One L-BFGS iteration per step (its curvature pairs persist between steps); the
         # strong Wolfe line search may evaluate the cost up to 25 times per iteration.
         optimizer = torch.optim.LBFGS(
-            [values, log_weights], lr=1.0, max_iter=1, max_eval=25, history_size=10,
+            list(trained), lr=1.0, max_iter=1, max_eval=25, history_size=10,
             tolerance_change=0.0, tolerance_grad=0.0, line_search_fn="strong_wolfe",
         )
         grad_tolerance = 1e-7 if cfg.tolerance > 0 else 0.0
 
         def closure():
-            optimizer.zero_grad(set_to_none=True)
-            total = recorder()
-            total.backward()
-            return total
+            return recorder()
 
         for _ in range(cfg.iterations):
             recorder.mark()
             optimizer.step(closure)
             iterations_run += 1
-            if grad_tolerance and _max_grad((values, log_weights)) <= grad_tolerance:
+            if grad_tolerance and _max_grad(trained) <= grad_tolerance:
                 break
             if len(recorder.history) >= 2 and cfg.tolerance and abs(recorder.history[-1] - recorder.history[-2]) < cfg.tolerance:
                 break
