@@ -71,14 +71,15 @@ def check_fit_size(cfg: FitConfig, target: Target, *, budget: float | None = Non
     """Refuse, before any work, a fit that cannot be determined or cannot fit in memory.
 
     Raises an OptionError with one line: the control net against the number of fitted
-    points (unordered inputs: at most one control point per point), or the memory the
+    points (at most one control point per point), or the memory the
     control net and the grids need against what is available, with the largest
-    ``--ctrl`` and ``--resolution`` that fit.
+    ``--ctrl`` and ``--resolution`` that fit. (Supervised: the fitted points are the
+    target grid's.)
     """
     n_u, n_v = cfg.ctrl
     k = n_u * n_v
     m = target.points.shape[0]
-    if not target.supervised and k > m:
+    if k > m:
         side = math.isqrt(m)
         raise OptionError(
             f"ctrl: {n_u}x{n_v} = {k} control points cannot be determined by {m} fitted points; "
