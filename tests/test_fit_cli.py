@@ -83,6 +83,7 @@ def run(argv) -> int:
         (["--lr", "1e30"], "--lr: expected a number in (0, 10], got 1e30"),
         (["--threads", "0"], "--threads: expected an integer in [1, 4096], got 0"),
         (["--max-points", "-1"], "--max-points"),
+        (["--degree", "40x3", "--ctrl", "50x50"], "degree: expected two integers in [1, 15]"),
         (["--dtype", "float16"], "invalid choice"),
     ],
 )

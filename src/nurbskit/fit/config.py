@@ -39,6 +39,7 @@ CLOSED = ("auto", "open", "v")
 #: here diverge in fit units, where the input's diagonal is 1).
 LR_RANGE = (0.0, 10.0)
 MAX_ITERS = 1_000_000
+MAX_DEGREE = 15
 
 
 def _f(default, help: str, **kw):
@@ -178,6 +179,8 @@ class FitConfig:
                 continue
             if pair is None or len(pair) != 2 or any(int(x) != x or x < low for x in pair):
                 raise OptionError(f"{name}: expected two integers >= {low}, got {tuple(pair)}")
+        if self.degree is not None and max(self.degree) > MAX_DEGREE:
+            raise OptionError(f"degree: expected two integers in [1, {MAX_DEGREE}], got {tuple(self.degree)}")
         for a, (n, p) in enumerate(zip(self.ctrl or (15, 15), self.degree or (3, 3))):
             if n < p + 1:
                 raise OptionError(f"ctrl: degree {p} along {'uv'[a]} needs at least {p + 1} control points, got {n}")
