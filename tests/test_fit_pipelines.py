@@ -237,6 +237,8 @@ def test_config_round_trip_and_validation():
         bad.validate()
     with pytest.raises(OptionError, match="unknown field"):
         config_from_dict({"pipeline": "x", "colour": 3})
+    # files written when the configuration still named a device and a dtype
+    assert config_from_dict({**config_to_dict(cfg), "device": "cpu", "dtype": "float64"}) == cfg
 
 
 def test_bad_inputs_give_clear_errors():

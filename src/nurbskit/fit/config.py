@@ -236,7 +236,11 @@ def config_to_dict(cfg: Any) -> dict:
 
 
 def config_from_dict(data: dict) -> FitConfig:
-    """Inverse of :func:`config_to_dict` (unknown keys raise an OptionError)."""
+    """Inverse of :func:`config_to_dict` (unknown keys raise an OptionError).
+
+    The top-level ``device`` and ``dtype`` of older files are ignored: a fit runs on its
+    input's device and dtype.
+    """
 
     def build(cls, d):
         if not isinstance(d, dict):
@@ -260,4 +264,7 @@ def config_from_dict(data: dict) -> FitConfig:
             kw[k] = v
         return cls(**kw)
 
+    if isinstance(data, dict) and ("device" in data or "dtype" in data):
+        # config.json files written before dtype and device followed the input.
+        data = {k: v for k, v in data.items() if k not in ("device", "dtype")}
     return build(FitConfig, data)
