@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     from nurbskit.fit.outputs import fit_report
 
     # Warm-up: the first fit of a process also pays for imports (scipy, the projection).
-    fit_surface(smooth_patch(200, 0.001, 99), get_pipeline("default").with_iters(2))
+    fit_surface(smooth_patch(300, 0.001, 99), get_pipeline("default").with_iters(2))
     t0 = time.perf_counter()
     patches = []
     seeds = [0] if args.quick else [0, 1, 2, 3, 4]

@@ -14,7 +14,8 @@ import sys
 from pathlib import Path
 
 from nurbskit import save
-from nurbskit.volume import fit_silhouettes, write_mesh
+from nurbskit.io import write_mesh
+from nurbskit.volume import fit_silhouettes, get_preset
 from nurbskit.volume.figure import write_comparison_png
 from nurbskit.volume.shapes import paper_drawings
 
@@ -33,10 +34,10 @@ def main() -> None:
         if stage == "fit" and done % 10 == 0:
             print(f"  iteration {done}/{total}  cost {cost:.3g}", file=sys.stderr)
 
-    result = fit_silhouettes(d["front"], d["left"], d["top"], grid=args.grid,
-                             control_size=args.control_size, loss=args.loss, callback=progress)
+    cfg = get_preset("default").replace(grid=args.grid, control_size=args.control_size, loss=args.loss)
+    result = fit_silhouettes(d, cfg, callback=progress)
     args.outdir.mkdir(parents=True, exist_ok=True)
-    write_mesh(args.outdir / "mesh.obj", result.mesh)
+    write_mesh(args.outdir / "mesh.obj", result.mesh.vertices, result.mesh.faces)
     save(result.volume, args.outdir / "volume.json")
     write_comparison_png(args.outdir / "views.png", result.drawings, result.projections, result.iou)
     (args.outdir / "report.json").write_text(json.dumps(result.report(), indent=2))

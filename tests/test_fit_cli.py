@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -38,6 +39,7 @@ def test_fit_writes_everything(cloud, tmp_path, capsys):
     assert "wrote" in text and "input-to-surface mean" in text
     report = json.loads((out / "report.json").read_text())
     assert report["pipeline"] == "default" and report["iterations"] == 3
+    assert report["final_loss"] < report["initial_loss"]  # the loss went down
     config = json.loads((out / "config.json").read_text())
     assert config["ctrl"] == [6, 6] and config["resolution"] == [16, 16]
     pts = (out / "points.off").read_text().split("\n")
@@ -58,6 +60,14 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
     assert main(args + ["--overwrite"]) == 0
 
 
+def run(argv) -> int:
+    """main's exit code, whether argparse (SystemExit) or the command refused the input."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
 @pytest.mark.parametrize(
     "extra, message",
     [
@@ -65,15 +75,20 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
         (["--ctrl", "axb"], "--ctrl"),
         (["--ctrl", "2x9"], "ctrl"),
         (["--resolution", "1x5"], "--resolution"),
-        (["--iters", "-4"], "--iters"),
+        (["--iters", "-4"], "--iters: expected an integer in [0, 1000000], got -4"),
+        (["--iters", "10000000"], "--iters: expected an integer in [0, 1000000]"),
         (["--pipeline", "SC"], "supervised"),
         (["--device", "tpu"], "--device"),
-        (["--lr", "0"], "--lr"),
-        (["--threads", "0"], "--threads"),
+        (["--lr", "0"], "--lr: expected a number in (0, 10], got 0"),
+        (["--lr", "1e30"], "--lr: expected a number in (0, 10], got 1e30"),
+        (["--threads", "0"], "--threads: expected an integer in [1, 4096], got 0"),
+        (["--max-points", "-1"], "--max-points"),
+        (["--degree", "40x3", "--ctrl", "50x50"], "degree: expected two integers in [1, 15]"),
+        (["--dtype", "float16"], "invalid choice"),
     ],
 )
 def test_bad_options_are_one_line_errors(cloud, tmp_path, capsys, extra, message):
-    rc = main(["fit", str(cloud), "--out", str(tmp_path / "o"), "--quiet"] + extra)
+    rc = run(["fit", str(cloud), "--out", str(tmp_path / "o"), "--quiet"] + extra)
     err = capsys.readouterr().err
     assert rc == 2
     assert message in err and "Traceback" not in err and err.count("\n") == 1
@@ -146,3 +161,21 @@ def test_horse_unsupervised_runs_on_the_real_file(shared_data, tmp_path):
     assert rc == 0
     report = json.loads((out / "report.json").read_text())
     assert report["points"] == 2512 and report["topology"]["closed_v"] is True
+
+
+def test_demo_finds_its_data_from_the_environment_or_the_working_directory(tmp_path, monkeypatch):
+    import nurbskit.demo as demo
+
+    monkeypatch.delenv("NURBSKIT_DATA", raising=False)
+    assert demo.data_root() == Path("..") / "shared" / "data"  # relative: resolved in the working directory
+    assert demo.data_root(str(tmp_path)) == tmp_path
+    monkeypatch.setenv("NURBSKIT_DATA", str(tmp_path / "elsewhere"))
+    assert demo.data_root() == tmp_path / "elsewhere"
+    assert demo.data_root(str(tmp_path)) == tmp_path  # --data wins
+    # found through the working directory, whatever the module's own location
+    monkeypatch.delenv("NURBSKIT_DATA")
+    (tmp_path / "shared" / "data" / "thesis_nurbsdiff").mkdir(parents=True)
+    (tmp_path / "work").mkdir()
+    monkeypatch.chdir(tmp_path / "work")
+    assert demo.thesis_data_dir(demo.data_root()).resolve() == (tmp_path / "shared" / "data" / "thesis_nurbsdiff").resolve()
+    assert not hasattr(demo, "SHARED_DATA")

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+from _assert import assert_close
 
 from nurbskit.errors import OptionError
 from nurbskit.volume.drawings import mask_on_plane
@@ -38,7 +39,7 @@ def test_dot_drawings_map_to_the_stated_octant():
     idx = torch.nonzero(hull > 0.5).float() / (H - 1)
     assert len(idx) > 0
     centre = idx.mean(0)
-    assert torch.allclose(centre, torch.tensor([0.8, 0.75, 0.25]), atol=0.02)
+    assert_close(centre, torch.tensor([0.8, 0.75, 0.25]), atol=0.02)
     # every occupied cell is in the octant x > 1/2, y > 1/2, z < 1/2
     assert (idx[:, 0] > 0.5).all() and (idx[:, 1] > 0.5).all() and (idx[:, 2] < 0.5).all()
 
@@ -57,7 +58,7 @@ def test_a_voxel_projects_to_the_pixels_of_the_table():
 def test_points_to_pixels_agrees_with_project_grid():
     point = torch.tensor([[0.75, 0.125, 0.3]], dtype=torch.float64)
     for view, rc in zip(VIEWS, [(35.0, 30.0), (35.0, 12.0), (12.0, 30.0)]):
-        assert torch.allclose(points_to_pixels(point, view, H, W)[0], torch.tensor(rc, dtype=torch.float64)), view.name
+        assert_close(points_to_pixels(point, view, H, W)[0], torch.tensor(rc, dtype=torch.float64), msg=str(view.name))
 
 
 def test_mesh_projection_lands_where_the_solid_is():

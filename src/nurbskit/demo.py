@@ -8,10 +8,12 @@ Run as ``python -m nurbskit.demo --out out``. It writes
 * ``out/fit/``: our default pipeline fitted to a 900-point Poisson-disk sample of the
   duck (the thesis's unsupervised input), with everything ``nurbskit fit`` writes.
 
-The duck comes from ``../shared/data/thesis_nurbsdiff/ducky`` beside the repository
-when that folder exists; otherwise a built-in closed shape (a bumpy egg) stands in
-for it, written to ``out/egg/`` as ``egg.*``. Every run replaces those folders and
-``out/fit``.
+The duck comes from ``<data>/thesis_nurbsdiff/ducky``, where ``<data>`` is ``--data``,
+else the environment variable ``NURBSKIT_DATA``, else ``../shared/data`` relative to
+the working directory (``make demo`` runs in the repository's root); never a path
+derived from where this file is installed. Without that folder a built-in closed shape
+(a bumpy egg) stands in for the duck, written to ``out/egg/`` as ``egg.*``. Every run
+replaces those folders and ``out/fit``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -28,14 +31,22 @@ import torch
 
 from .core import NURBSSurface
 
-#: ``../shared/data`` beside the repository (src/nurbskit/demo.py -> repo root -> its parent).
-SHARED_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+#: The data folder relative to the working directory when neither --data nor NURBSKIT_DATA says.
+DEFAULT_DATA = Path("..") / "shared" / "data"
 DUCK_SIZES = (14, 13)
 
 
-def thesis_data_dir(root: Path | None = None) -> Path | None:
-    """``<root>/thesis_nurbsdiff`` when present (root defaults to ``../shared/data``)."""
-    d = (root or SHARED_DATA) / "thesis_nurbsdiff"
+def data_root(given: str | os.PathLike | None = None) -> Path:
+    """The data folder: ``given``, else ``$NURBSKIT_DATA``, else ``../shared/data`` from the working directory."""
+    if given:
+        return Path(given)
+    env = os.environ.get("NURBSKIT_DATA")
+    return Path(env) if env else DEFAULT_DATA
+
+
+def thesis_data_dir(root: Path) -> Path | None:
+    """``<root>/thesis_nurbsdiff`` when present."""
+    d = Path(root) / "thesis_nurbsdiff"
     return d if d.is_dir() else None
 
 
@@ -72,26 +83,12 @@ def builtin_shape(dtype: torch.dtype = torch.float64) -> NURBSSurface:
 
 
 def grid_mesh(surface: NURBSSurface, resolution: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``(R*S, 3)`` and triangles ``(2*(R-1)*(S-1), 3)`` of the sampled grid.
+    """Vertices ``(R*S, 3)`` float64 and triangles ``(2*(R-1)*(S-1), 3)`` of :func:`~nurbskit.core.tessellate.tessellate`."""
+    from .core.tessellate import tessellate
 
-    Uses :func:`nurbskit.core.tessellate.tessellate` when it is available.
-    """
-    try:
-        from .core.tessellate import tessellate
-
-        v, f, _ = tessellate(surface, resolution)
-        return np.asarray(v.detach().cpu() if hasattr(v, "detach") else v, dtype=np.float64), np.asarray(
-            f.cpu() if hasattr(f, "cpu") else f, dtype=np.int64)
-    except ImportError:
-        pass
-    r, s = resolution
     with torch.no_grad():
-        v = surface.sample(resolution).reshape(-1, 3).double().cpu().numpy()
-    i, j = np.meshgrid(np.arange(r - 1), np.arange(s - 1), indexing="ij")
-    a = (i * s + j).ravel()
-    b, c, d = a + s, a + s + 1, a + 1
-    f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return v, f
+        v, f, _ = tessellate(surface, resolution)
+    return v.double().cpu().numpy(), f.cpu().numpy()
 
 
 def poisson_sample(surface: NURBSSurface, n: int, seed: int = 0, resolution=(128, 128)) -> np.ndarray:
@@ -124,7 +121,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(prog="python -m nurbskit.demo", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out", help="output folder (its duck/ or egg/, and fit/, are replaced)")
-    parser.add_argument("--data", default=None, help="folder holding thesis_nurbsdiff/ (default ../shared/data)")
+    parser.add_argument("--data", default=None,
+                        help="folder holding thesis_nurbsdiff/ (default $NURBSKIT_DATA, else ../shared/data "
+                             "from the working directory)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--threads", type=int, default=1,
                         help="torch threads (default 1: the demo's problems are small, and extra threads "
@@ -136,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     t0 = time.perf_counter()
 
-    thesis = thesis_data_dir(Path(args.data) if args.data else None)
+    thesis = thesis_data_dir(data_root(args.data))
     if thesis is not None:
         shape, name, source = load_duck(thesis), "duck", f"the thesis duck from {thesis / 'ducky'}"
     else:

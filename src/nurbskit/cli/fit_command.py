@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, OptionError
-from ..fit.config import CLOSED, INIT_KINDS, LAPLACIAN_ON, FitConfig, InitConfig, LossWeights
+from ..fit.config import CLOSED, INIT_KINDS, LAPLACIAN_ON, LR_RANGE, MAX_ITERS, FitConfig, InitConfig, LossWeights
+from ._options import add_device_options, device_and_dtype, int_in, number_in
 
 
 def _help(cls, name: str) -> str:
@@ -59,18 +60,18 @@ def register(subparsers) -> None:
     p.add_argument("--ctrl", default=None, metavar="NUxNV", help=_help(FitConfig, "ctrl") + " (e.g. 15x15)")
     p.add_argument("--degree", default=None, metavar="PxQ", help=_help(FitConfig, "degree") + " (e.g. 3 or 3x3)")
     p.add_argument("--resolution", default="64x64", metavar="RxS", help=_help(FitConfig, "resolution") + " (default 64x64)")
-    p.add_argument("--iters", type=int, default=None, metavar="N",
+    p.add_argument("--iters", type=int_in(0, MAX_ITERS), default=None, metavar="N",
                    help="total gradient iterations, shared by the pipeline's stages in its proportions (default: the preset's)")
     p.add_argument("--init", choices=INIT_KINDS, default=None, help=_help(InitConfig, "kind") + " (default: the preset's)")
     p.add_argument("--closed", choices=CLOSED, default=None, help=_help(InitConfig, "closed"))
     p.add_argument("--laplacian-on", choices=LAPLACIAN_ON, default=None, help=_help(LossWeights, "laplacian_on"))
-    p.add_argument("--lr", type=float, default=None, help="learning rate of every stage (default: the preset's)")
-    p.add_argument("--device", default="cpu", help=_help(FitConfig, "device"))
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float64", help=_help(FitConfig, "dtype"))
-    p.add_argument("--seed", type=int, default=0, help=_help(FitConfig, "seed"))
-    p.add_argument("--max-points", type=int, default=None, metavar="N",
+    p.add_argument("--lr", type=number_in(*LR_RANGE, low_open=True), default=None,
+                   help=f"learning rate of every stage, in ({LR_RANGE[0]:g}, {LR_RANGE[1]:g}] (default: the preset's)")
+    add_device_options(p, dtype_default="float64")
+    p.add_argument("--seed", type=int_in(0, 2**63 - 1), default=0, help=_help(FitConfig, "seed"))
+    p.add_argument("--max-points", type=int_in(0), default=None, metavar="N",
                    help=_help(FitConfig, "max_points") + " (default 20000)")
-    p.add_argument("--threads", type=int, default=None, metavar="N",
+    p.add_argument("--threads", type=int_in(1, 4096), default=None, metavar="N",
                    help="torch CPU threads (default: torch's choice); 1 is often fastest for small clouds on a busy machine")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -114,26 +115,17 @@ def run_fit(args) -> int:
     from ..fit.api import resolve_config
     from ..fit.outputs import write_fit_outputs
 
+    import torch
+
+    from ..fit.checks import check_resolution
+
     resolution = parse_pair(args.resolution, "resolution", 2)
     ctrl = parse_pair(args.ctrl, "ctrl", 2) if args.ctrl else None
     degree = parse_pair(args.degree, "degree", 1) if args.degree else None
-    if args.iters is not None and args.iters < 0:
-        raise OptionError(f"--iters must be >= 0, got {args.iters}")
-    if args.lr is not None and not args.lr > 0:
-        raise OptionError(f"--lr must be positive, got {args.lr}")
+    device, dtype = device_and_dtype(args)
+    check_resolution(resolution, torch.finfo(dtype).bits // 8)
     if args.threads is not None:
-        if args.threads < 1:
-            raise OptionError(f"--threads must be >= 1, got {args.threads}")
-        import torch
-
         torch.set_num_threads(args.threads)
-    if args.device.startswith("cuda"):
-        import torch
-
-        if not torch.cuda.is_available():
-            raise OptionError(f"--device {args.device}: torch sees no CUDA device on this machine")
-    elif args.device != "cpu":
-        raise OptionError(f"--device must be cpu or cuda[:N], got {args.device!r}")
     # Refuse a bad --out before the (possibly long) fit.
     from .._fs import check_output_dir
 
@@ -147,7 +139,7 @@ def run_fit(args) -> int:
             f"--pipeline {cfg.pipeline} is supervised: INPUT must be a NURBS file or an ordered .npy grid "
             f"(R, S, 3), got a point cloud ({args.input})"
         )
-    cfg = dataclasses.replace(cfg, resolution=resolution, seed=args.seed, device=args.device, dtype=args.dtype)
+    cfg = dataclasses.replace(cfg, resolution=resolution, seed=args.seed)
     if args.max_points is not None:
         cfg.max_points = args.max_points
     if ctrl is not None:
@@ -169,13 +161,19 @@ def run_fit(args) -> int:
     if cfg.init.kind == "target" and not cfg.supervised:
         raise OptionError(f"--init target (the target's knots and weights) needs a supervised pipeline; {cfg.pipeline} is not")
 
+    # --device and --dtype move the input; the fit then runs on the input's device and dtype.
+    if kind == "surface":
+        data = data.to(dtype=dtype, device=device)
+    else:
+        data = torch.as_tensor(data).to(dtype=dtype, device=device)
     kwargs = {}
     if cfg.supervised:
         kwargs = {"target_surface": data} if kind == "surface" else {"target_grid": data}
         points = None
     else:
         if kind == "surface":
-            points = data.sample(resolution).reshape(-1, 3)
+            with torch.no_grad():
+                points = data.sample(resolution).reshape(-1, 3)
         elif kind == "grid":
             points = data.reshape(-1, 3)
         else:

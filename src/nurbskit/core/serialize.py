@@ -7,10 +7,12 @@ nurbskit JSON (version 1)::
      "control_points": nested lists shaped (n_1, ..., n_k, dim),
      "weights": nested lists shaped (n_1, ..., n_k)}
 
-geomdl orders control points differently, and these adapters are the one place that
-knows it: surfaces are flattened with v fastest (index ``iu * n_v + iv``); volumes
-with w outermost, then u, then v (index ``iw * n_u * n_v + iu * n_v + iv``). geomdl
-speaks of order (degree + 1) in places; these adapters speak degrees.
+Convention: geomdl flattens control points in its own order, and this module is the one
+place that knows it (:func:`to_geomdl_order`, :func:`from_geomdl_order`, used by the
+geomdl adapters here and by every geomdl-ordered file in :mod:`nurbskit.io.nurbs`):
+curves in order; surfaces with v fastest (index ``iu * n_v + iv``); volumes with w
+outermost, then u, then v (index ``iw * n_u * n_v + iu * n_v + iv``). geomdl speaks of
+order (degree + 1) in places; these adapters speak degrees.
 """
 
 from __future__ import annotations
@@ -101,6 +103,47 @@ def load(path: str | os.PathLike, *, dtype: torch.dtype = torch.float64, device=
 
 # ---- geomdl -------------------------------------------------------------------------
 
+def to_geomdl_order(control_points, weights) -> tuple[np.ndarray, np.ndarray]:
+    """Control points ``(*sizes, dim)`` and weights ``(*sizes)`` flattened in geomdl's order.
+
+    Returns float64 arrays ``(N, dim)`` and ``(N,)``; ``sizes`` has 1, 2 or 3 entries
+    (curve, surface, volume).
+
+    Example:
+        >>> cp = np.arange(2 * 3 * 4 * 1, dtype=float).reshape(2, 3, 4, 1)  # (n_u, n_v, n_w, 1)
+        >>> to_geomdl_order(cp, np.ones((2, 3, 4)))[0][:3, 0].tolist()  # w outermost: (0,0,0), (0,1,0), (0,2,0)
+        [0.0, 4.0, 8.0]
+    """
+    cp = _numpy(control_points)
+    w = _numpy(weights)
+    if cp.ndim == 4:  # volume: w outermost, then u, then v
+        cp = cp.transpose(2, 0, 1, 3)
+        w = w.transpose(2, 0, 1)
+    return np.ascontiguousarray(cp.reshape(-1, cp.shape[-1])), np.ascontiguousarray(w.reshape(-1))
+
+
+def from_geomdl_order(points, weights, sizes) -> tuple[np.ndarray, np.ndarray | None]:
+    """Inverse of :func:`to_geomdl_order`: ``(N, dim)`` and ``(N,)`` (or None) -> ``(*sizes, dim)``, ``(*sizes)``."""
+    sizes = [int(n) for n in sizes]
+    points = np.asarray(points, dtype=np.float64)
+    dim = points.shape[-1]
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    if len(sizes) == 3:
+        nu, nv, nw = sizes
+        cp = points.reshape(nw, nu, nv, dim).transpose(1, 2, 0, 3)
+        w = None if w is None else w.reshape(nw, nu, nv).transpose(1, 2, 0)
+    else:
+        cp = points.reshape(*sizes, dim)
+        w = None if w is None else w.reshape(*sizes)
+    return np.ascontiguousarray(cp), None if w is None else np.ascontiguousarray(w)
+
+
+def _numpy(t) -> np.ndarray:
+    if isinstance(t, torch.Tensor):
+        return t.detach().cpu().double().numpy()
+    return np.asarray(t, dtype=np.float64)
+
+
 def _geomdl():
     try:
         from geomdl import NURBS
@@ -112,13 +155,9 @@ def _geomdl():
 def to_geomdl(obj: TensorSpline):
     """A geomdl ``NURBS.Curve`` / ``NURBS.Surface`` / ``NURBS.Volume`` equal to ``obj``."""
     NURBS = _geomdl()
-    cp = obj.control_points.detach().cpu().double().numpy()
-    w = obj.weights.detach().cpu().double().numpy()
+    cp, w = to_geomdl_order(obj.control_points, obj.weights)
     kvs = [kv.detach().cpu().double().tolist() for kv in obj.knot_vectors]
-    if obj.kind == "volume":  # w outermost, then u, then v
-        cp = cp.transpose(2, 0, 1, 3)
-        w = w.transpose(2, 0, 1)
-    cpw = np.concatenate([cp * w[..., None], w[..., None]], axis=-1).reshape(-1, cp.shape[-1] + 1).tolist()
+    cpw = np.concatenate([cp * w[:, None], w[:, None]], axis=-1).tolist()
     if obj.kind == "curve":
         g = NURBS.Curve()
         g.degree = obj.degrees[0]
@@ -142,20 +181,16 @@ def from_geomdl(g, *, dtype: torch.dtype = torch.float64, device=None) -> Tensor
     cpw = np.asarray(g.ctrlptsw if hasattr(g, "ctrlptsw") else [list(p) + [1.0] for p in g.ctrlpts], dtype=np.float64)
     w = cpw[:, -1]
     cp = cpw[:, :-1] / w[:, None]
-    dim = cp.shape[-1]
     as_t = lambda a: torch.as_tensor(a, dtype=dtype, device=device)  # noqa: E731
     if g.pdimension == 1:
         return NURBSCurve(as_t(cp), g.degree, as_t(g.knotvector), as_t(w))
     if g.pdimension == 2:
-        nu, nv = g.ctrlpts_size_u, g.ctrlpts_size_v
+        cp, w = from_geomdl_order(cp, w, (g.ctrlpts_size_u, g.ctrlpts_size_v))
         return NURBSSurface(
-            as_t(cp.reshape(nu, nv, dim)), (g.degree_u, g.degree_v),
-            [as_t(g.knotvector_u), as_t(g.knotvector_v)], as_t(w.reshape(nu, nv)),
+            as_t(cp), (g.degree_u, g.degree_v), [as_t(g.knotvector_u), as_t(g.knotvector_v)], as_t(w),
         )
-    nu, nv, nw = g.ctrlpts_size_u, g.ctrlpts_size_v, g.ctrlpts_size_w
-    cp = cp.reshape(nw, nu, nv, dim).transpose(1, 2, 0, 3)
-    w = w.reshape(nw, nu, nv).transpose(1, 2, 0)
+    cp, w = from_geomdl_order(cp, w, (g.ctrlpts_size_u, g.ctrlpts_size_v, g.ctrlpts_size_w))
     return NURBSVolume(
-        as_t(np.ascontiguousarray(cp)), (g.degree_u, g.degree_v, g.degree_w),
-        [as_t(g.knotvector_u), as_t(g.knotvector_v), as_t(g.knotvector_w)], as_t(np.ascontiguousarray(w)),
+        as_t(cp), (g.degree_u, g.degree_v, g.degree_w),
+        [as_t(g.knotvector_u), as_t(g.knotvector_v), as_t(g.knotvector_w)], as_t(w),
     )

@@ -1,9 +1,12 @@
 """``fit_surface``: one fit from data and a configuration.
 
-Flow (docs/architecture.md, "Flow of one fit"): normalise the input -> initial
-surface (:mod:`.init`) -> alternating projection and least squares
-(:mod:`.lstsq`, when configured) -> the gradient stages of the one loop
-(:mod:`.loop`) -> the surface back in input units.
+Flow (docs/architecture.md, "Flow of one fit"), one function per stage:
+:func:`prepare_target` (the input as tensors) -> :func:`normalise` (fit units) ->
+:func:`~nurbskit.fit.checks.check_fit_size` -> :func:`initial_state` (the initial
+surface of :mod:`.init`, then alternating projection and least squares of
+:mod:`.lstsq` when configured) -> :func:`run_stages` (the gradient stages of the one
+loop, :mod:`.loop`) -> :func:`denormalise` (the surface back in input units) ->
+:func:`~nurbskit.fit.checks.check_result`.
 """
 
 from __future__ import annotations
@@ -63,11 +66,23 @@ class FitResult:
         return self.loop_seconds / self.iterations if self.iterations else 0.0
 
 
-def _as_points(x, name: str, dtype, device) -> Tensor:
-    t = torch.as_tensor(np.asarray(x.detach().cpu() if isinstance(x, Tensor) else x, dtype=np.float64))
+def _as_points(x, name: str) -> Tensor:
+    """A floating tensor on the input's own device and dtype (arrays: their dtype, else float64)."""
+    if isinstance(x, Tensor):
+        t = x.detach()
+        if not t.is_floating_point():
+            t = t.to(torch.float64)
+    else:
+        a = np.asarray(x)
+        if a.dtype not in (np.float32, np.float64):
+            try:
+                a = a.astype(np.float64)
+            except (TypeError, ValueError):
+                raise InputError(f"{name}: expected numbers, got an array of {a.dtype}") from None
+        t = torch.from_numpy(np.ascontiguousarray(a))
     if not torch.isfinite(t).all():
         raise InputError(f"{name} contains NaN or infinite values")
-    return t.to(dtype=dtype, device=device)
+    return t
 
 
 def _normalised_knots(kv: Tensor, degree: int, n: int) -> Tensor:
@@ -88,57 +103,38 @@ def resolve_config(config: FitConfig | str | None, supervised_input: bool) -> Fi
     return cfg.validate()
 
 
-def fit_surface(
-    points=None,
-    config: FitConfig | str | None = None,
-    *,
-    target_grid=None,
-    target_surface: NURBSSurface | None = None,
-    callback: Callable[[Progress], None] | None = None,
-) -> FitResult:
-    """Fit a NURBS surface to points (unsupervised) or to an ordered target (supervised).
+@dataclass
+class Prepared:
+    """The input of one fit, on its own device and dtype, before normalisation.
 
-    Args:
-        points: ``(N, 3)`` unordered input points (tensor or array).
-        config: a pipeline name (``"UCDL"``), a :class:`FitConfig`, or None for
-            ``default``.
-        target_grid: ``(R, S, 3)`` ordered points sampled on a uniform parametric grid
-            (supervised pipelines).
-        target_surface: a known surface; sampled on ``config.resolution`` for the
-            supervised target; its knots and weights serve ``init="target"`` (SC).
-        callback: called with a :class:`~nurbskit.fit.loop.Progress` after every
-            iteration.
-
-    Returns:
-        a :class:`FitResult`; dtype and device follow ``config.dtype`` / ``config.device``.
-
-    Example:
-        >>> import torch
-        >>> g = torch.rand(400, 2, dtype=torch.float64)
-        >>> pts = torch.stack([g[:, 0], g[:, 1], 0.2 * torch.sin(3 * g[:, 0])], -1)
-        >>> result = fit_surface(pts, "default")
-        >>> result.surface.sizes
-        (15, 15)
+    ``points (N, 3)`` every input point (the report measures them all); ``grid (R, S, 3)``
+    the ordered supervised target or None; ``control_points`` the true control net of a
+    supervised NURBS target or None.
     """
+
+    points: Tensor
+    grid: Tensor | None = None
+    control_points: Tensor | None = None
+
+
+def prepare_target(
+    points, cfg: FitConfig, target_grid=None, target_surface: NURBSSurface | None = None
+) -> Prepared:
+    """Stage 1: the input as tensors; dtype and device follow the input (the surface's, the grid's, the points')."""
     supervised_input = target_grid is not None or target_surface is not None
-    cfg = resolve_config(config, supervised_input)
-    t0 = time.perf_counter()
-    dtype = torch.float64 if cfg.dtype == "float64" else torch.float32
-    device = torch.device(cfg.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise OptionError("device cuda was requested but torch sees no CUDA device")
     if cfg.supervised and not supervised_input:
         raise OptionError(
             f"pipeline {cfg.pipeline} is supervised: give a NURBS surface or an ordered (R, S, 3) grid, not a point cloud"
         )
+    from .checks import check_resolution
 
     true_cp = None
     if target_surface is not None:
-        ts = target_surface.to(dtype=dtype, device=device)
-        target_grid = ts.sample(cfg.resolution)
-        true_cp = ts.control_points
+        check_resolution(tuple(cfg.resolution), target_surface.control_points.element_size())
+        target_grid = target_surface.sample(cfg.resolution).detach()
+        true_cp = target_surface.control_points.detach()
     if target_grid is not None:
-        grid = _as_points(target_grid, "target grid", dtype, device)
+        grid = _as_points(target_grid, "target grid")
         if grid.ndim != 3 or grid.shape[-1] != 3 or min(grid.shape[:2]) < 2:
             raise InputError(f"a supervised target must be an ordered grid (R, S, 3) with R, S >= 2, got {tuple(grid.shape)}")
         pts = grid.reshape(-1, 3)
@@ -146,21 +142,32 @@ def fit_surface(
         if points is None:
             raise OptionError("fit_surface needs points, a target_grid or a target_surface")
         grid = None
-        pts = _as_points(points, "points", dtype, device)
+        pts = _as_points(points, "points")
         if pts.ndim != 2 or pts.shape[-1] != 3:
             raise InputError(f"points must have shape (N, 3), got {tuple(pts.shape)}")
     if pts.shape[0] < 4:
         raise InputError(f"a surface fit needs at least 4 points, got {pts.shape[0]}")
+    return Prepared(pts, grid, true_cp)
 
-    # Normalise: centre of the bounding box to the origin, diagonal to 1.
+
+def normalise(prepared: Prepared, cfg: FitConfig) -> tuple[Target, Tensor, float]:
+    """Stage 2: the target in fit units, and the ``(center, scale)`` that map them back.
+
+    Fit units: the centre of the bounding box at the origin, the diagonal 1 (unless
+    ``cfg.normalize`` is off). Large unordered inputs are reduced to a seeded random
+    subset of ``cfg.max_points``. Raises an InputError when the points do not determine
+    a surface (they coincide or lie on one line).
+    """
+    pts, grid = prepared.points, prepared.grid
     lo, hi = pts.min(0).values, pts.max(0).values
     if not float((hi - lo).norm()) > 0:
         raise InputError(f"all {pts.shape[0]} input points coincide; there is no surface to fit")
+    check_spread(pts)
     if cfg.normalize:
         center = (lo + hi) / 2
         scale = float((hi - lo).norm())
     else:
-        center, scale = torch.zeros(3, dtype=dtype, device=device), 1.0
+        center, scale = torch.zeros(3, dtype=pts.dtype, device=pts.device), 1.0
     xn = (pts - center) / scale
     if grid is None and cfg.max_points > 0 and xn.shape[0] > cfg.max_points:
         # Every step projects every fitted point, so the cost grows with the scan; a seeded
@@ -171,16 +178,37 @@ def fit_surface(
     target = Target(
         points=xn,
         grid=None if grid is None or not cfg.supervised else (grid - center) / scale,
-        control_points=None if true_cp is None else (true_cp - center) / scale,
+        control_points=None if prepared.control_points is None else (prepared.control_points - center) / scale,
     )
+    return target, center, scale
 
-    ctrl = cfg.ctrl or (tuple(target_surface.sizes) if target_surface is not None and cfg.supervised else DEFAULT_CTRL)
-    degree = cfg.degree or (tuple(target_surface.degrees) if target_surface is not None and cfg.supervised else DEFAULT_DEGREE)
-    cfg = dataclasses.replace(cfg, ctrl=tuple(ctrl), degree=tuple(degree))
-    cfg.validate()
+
+def check_spread(points: Tensor, ratio: float = 1e-9) -> None:
+    """Raise an InputError when ``points (N, 3)`` lie on one line: no surface is determined.
+
+    The test: the second singular value of the centred points is below ``ratio`` times
+    the first (the points' extent across the line is a ``ratio`` of their length).
+    """
+    x = points.detach().to(torch.float64)
+    s = torch.linalg.svdvals(x - x.mean(0))
+    if float(s[1]) <= ratio * float(s[0]):
+        raise InputError(
+            f"the {points.shape[0]} input points lie on a line (their spread across it is "
+            f"{float(s[1] / s[0]):.1e} of their length): a surface is not determined by them"
+        )
+
+
+def initial_state(
+    target: Target, cfg: FitConfig, target_surface: NURBSSurface | None = None
+) -> tuple[NURBSSurface, Topology, list[float], NURBSSurface]:
+    """Stage 3: the initial surface, then the alternation rounds when configured.
+
+    Returns ``(surface, topology, alternation history, initial surface)`` in fit units.
+    """
+    xn = target.points
+    dtype, device = xn.dtype, xn.device
+    ctrl, degree = cfg.ctrl, cfg.degree
     gen = torch.Generator().manual_seed(int(cfg.seed))
-
-    # Initial surface.
     if cfg.supervised and cfg.init.kind in ("target", "lstsq"):
         # The target's knots and weights when its net matches the requested one.
         if target_surface is not None and tuple(target_surface.sizes) == tuple(ctrl) and tuple(target_surface.degrees) == tuple(degree):
@@ -205,28 +233,100 @@ def fit_surface(
             xn, cfg.init.kind, ctrl, degree, cfg.init.closed, cfg.init.smoothness, generator=gen
         )
     init = surface
-
     alternation: list[float] = []
     if cfg.alternation.rounds and not cfg.supervised:
         surface, _, alternation = alternate(
             surface, xn, cfg.alternation.rounds, topology, cfg.alternation.smoothness, cfg.alternation.tolerance
         )
+    return surface, topology, alternation, init
 
-    params = SurfaceParameters(surface, topology).to(device)
+
+def run_stages(
+    surface: NURBSSurface, topology: Topology, target: Target, cfg: FitConfig,
+    callback: Callable[[Progress], None] | None = None,
+) -> tuple[NURBSSurface, list[dict]]:
+    """Stage 4: the gradient stages of the one loop; returns the fitted surface (fit units) and the history."""
+    params = SurfaceParameters(surface, topology).to(target.points.device)
     history: list[dict] = []
-    t_loop = time.perf_counter()
     for i, stage in enumerate(cfg.stages):
         history += run_stage(params, stage, target, cfg.resolution, stage_index=i, callback=callback)
-    loop_seconds = time.perf_counter() - t_loop
-
     fitted = params.surface()
-    out = fitted._replace(control_points=fitted.control_points * scale + center)
-    out = NURBSSurface(out.control_points, out.degrees, out.knot_vectors, out.weights)
-    init_out = init._replace(control_points=init.control_points.detach() * scale + center)
+    return NURBSSurface(
+        fitted.control_points.detach(), fitted.degrees, [k.detach() for k in fitted.knot_vectors], fitted.weights.detach()
+    ), history
+
+
+def denormalise(surface: NURBSSurface, center: Tensor, scale: float) -> NURBSSurface:
+    """Stage 5: a surface in fit units back in the input's units."""
+    return surface._replace(control_points=surface.control_points.detach() * scale + center)
+
+
+def _resolved_sizes(cfg: FitConfig, target_surface: NURBSSurface | None) -> FitConfig:
+    own = target_surface is not None and cfg.supervised
+    ctrl = cfg.ctrl or (tuple(target_surface.sizes) if own else DEFAULT_CTRL)
+    degree = cfg.degree or (tuple(target_surface.degrees) if own else DEFAULT_DEGREE)
+    return dataclasses.replace(cfg, ctrl=tuple(ctrl), degree=tuple(degree)).validate()
+
+
+def fit_surface(
+    points=None,
+    config: FitConfig | str | None = None,
+    *,
+    target_grid=None,
+    target_surface: NURBSSurface | None = None,
+    callback: Callable[[Progress], None] | None = None,
+) -> FitResult:
+    """Fit a NURBS surface to points (unsupervised) or to an ordered target (supervised).
+
+    The stages, each a function of this module: :func:`prepare_target`,
+    :func:`normalise`, :func:`~nurbskit.fit.checks.check_fit_size` (refuses what cannot
+    be determined or cannot fit in memory), :func:`initial_state`, :func:`run_stages`,
+    :func:`denormalise`, then :func:`~nurbskit.fit.checks.check_result` (a non-finite
+    result, or one far worse than its own start, raises a
+    :class:`~nurbskit.fit.checks.FitFailed`).
+
+    Args:
+        points: ``(N, 3)`` unordered input points (tensor or array).
+        config: a pipeline name (``"UCDL"``), a :class:`FitConfig`, or None for
+            ``default``.
+        target_grid: ``(R, S, 3)`` ordered points sampled on a uniform parametric grid
+            (supervised pipelines).
+        target_surface: a known surface; sampled on ``config.resolution`` for the
+            supervised target; its knots and weights serve ``init="target"`` (SC).
+        callback: called with a :class:`~nurbskit.fit.loop.Progress` after every
+            iteration.
+
+    Returns:
+        a :class:`FitResult`. Convention: dtype and device follow the input (a tensor's
+        own; an array's floating dtype on the CPU; other arrays become float64); move the
+        input to fit on another device.
+
+    Example:
+        >>> import torch
+        >>> g = torch.rand(400, 2, dtype=torch.float64)
+        >>> pts = torch.stack([g[:, 0], g[:, 1], 0.2 * torch.sin(3 * g[:, 0])], -1)
+        >>> result = fit_surface(pts, "default")
+        >>> result.surface.sizes, result.surface.dtype
+        ((15, 15), torch.float64)
+    """
+    from .checks import check_fit_size, check_result
+
+    supervised_input = target_grid is not None or target_surface is not None
+    cfg = resolve_config(config, supervised_input)
+    t0 = time.perf_counter()
+    prepared = prepare_target(points, cfg, target_grid, target_surface)
+    cfg = _resolved_sizes(cfg, target_surface)
+    target, center, scale = normalise(prepared, cfg)
+    check_fit_size(cfg, target)
+    surface, topology, alternation, init = initial_state(target, cfg, target_surface)
+    t_loop = time.perf_counter()
+    fitted, history = run_stages(surface, topology, target, cfg, callback)
+    loop_seconds = time.perf_counter() - t_loop
+    check_result(fitted, init, target, cfg)
     return FitResult(
-        surface=out,
+        surface=denormalise(fitted, center, scale),
         config=cfg,
-        points=pts,
+        points=prepared.points,
         topology=topology,
         history=history,
         alternation=alternation,
@@ -235,6 +335,6 @@ def fit_surface(
         iterations=len(history),
         center=center,
         scale=scale,
-        target_grid=grid,
-        initial_surface=init_out,
+        target_grid=prepared.grid,
+        initial_surface=denormalise(init, center, scale),
     )

@@ -14,6 +14,9 @@ resolved configuration is written as ``config.json`` next to every fit's outputs
 Convention: all lengths inside the fit are in *normalised* units: the input is
 centred on its bounding-box centre and scaled so that the box diagonal is 1. Loss
 weights and learning rates are therefore independent of the input's size.
+
+Convention: dtype and device are not configuration: a fit runs on the input's own
+(:func:`nurbskit.fit.fit_surface`); ``nurbskit fit --device/--dtype`` moves the input.
 """
 
 from __future__ import annotations
@@ -32,6 +35,11 @@ INIT_KINDS = ("auto", "random", "plane", "cylinder", "cage", "lstsq", "target")
 OPTIMIZERS = ("adam", "sgd", "lbfgs")
 LAPLACIAN_ON = ("grid", "control")
 CLOSED = ("auto", "open", "v")
+#: Sane ranges, checked before any work (a learning rate beyond this makes every optimiser
+#: here diverge in fit units, where the input's diagonal is 1).
+LR_RANGE = (0.0, 10.0)
+MAX_ITERS = 1_000_000
+MAX_DEGREE = 15
 
 
 def _f(default, help: str, **kw):
@@ -159,8 +167,6 @@ class FitConfig:
         "measures every point); 0: all points",
     )
     seed: int = _f(0, "seed of the fit's own random generator (random initialisation)")
-    device: str = _f("cpu", "torch device: cpu or cuda")
-    dtype: Literal["float32", "float64"] = _f("float64", "floating point type of the fit")
 
     @property
     def total_iters(self) -> int:
@@ -173,6 +179,8 @@ class FitConfig:
                 continue
             if pair is None or len(pair) != 2 or any(int(x) != x or x < low for x in pair):
                 raise OptionError(f"{name}: expected two integers >= {low}, got {tuple(pair)}")
+        if self.degree is not None and max(self.degree) > MAX_DEGREE:
+            raise OptionError(f"degree: expected two integers in [1, {MAX_DEGREE}], got {tuple(self.degree)}")
         for a, (n, p) in enumerate(zip(self.ctrl or (15, 15), self.degree or (3, 3))):
             if n < p + 1:
                 raise OptionError(f"ctrl: degree {p} along {'uv'[a]} needs at least {p + 1} control points, got {n}")
@@ -187,17 +195,15 @@ class FitConfig:
             )
         if int(self.max_points) != self.max_points or self.max_points < 0 or 0 < self.max_points < 4:
             raise OptionError(f"max_points: expected 0 (all points) or an integer >= 4, got {self.max_points!r}")
-        if self.dtype not in ("float32", "float64"):
-            raise OptionError(f"dtype: expected float32 or float64, got {self.dtype!r}")
-        if self.alternation.rounds < 0:
-            raise OptionError(f"alternation rounds must be >= 0, got {self.alternation.rounds}")
+        if not 0 <= self.alternation.rounds <= MAX_ITERS:
+            raise OptionError(f"alternation rounds must be in [0, {MAX_ITERS:,}], got {self.alternation.rounds}")
         for s in self.stages:
             if s.optimizer not in OPTIMIZERS:
                 raise OptionError(f"stage {s.name}: optimizer must be one of {', '.join(OPTIMIZERS)}, got {s.optimizer!r}")
-            if s.iters < 0:
-                raise OptionError(f"stage {s.name}: iters must be >= 0, got {s.iters}")
-            if not s.lr > 0:
-                raise OptionError(f"stage {s.name}: lr must be positive, got {s.lr}")
+            if not 0 <= s.iters <= MAX_ITERS:
+                raise OptionError(f"stage {s.name}: iters must be in [0, {MAX_ITERS:,}], got {s.iters}")
+            if not LR_RANGE[0] < s.lr <= LR_RANGE[1]:
+                raise OptionError(f"stage {s.name}: lr must be in ({LR_RANGE[0]:g}, {LR_RANGE[1]:g}], got {s.lr:g}")
             if s.loss.laplacian_on not in LAPLACIAN_ON:
                 raise OptionError(f"stage {s.name}: laplacian_on must be grid or control, got {s.loss.laplacian_on!r}")
             if not (s.train_control_points or s.train_weights or s.train_knots):
@@ -210,8 +216,8 @@ class FitConfig:
 
     def with_iters(self, iters: int) -> "FitConfig":
         """A copy whose stages share ``iters`` iterations in the preset's proportions."""
-        if iters < 0:
-            raise OptionError(f"--iters must be >= 0, got {iters}")
+        if not 0 <= iters <= MAX_ITERS:
+            raise OptionError(f"--iters must be in [0, {MAX_ITERS:,}], got {iters}")
         cfg = dataclasses.replace(self, stages=[dataclasses.replace(s) for s in self.stages])
         total = self.total_iters
         if not cfg.stages or total == 0:
@@ -230,7 +236,11 @@ def config_to_dict(cfg: Any) -> dict:
 
 
 def config_from_dict(data: dict) -> FitConfig:
-    """Inverse of :func:`config_to_dict` (unknown keys raise an OptionError)."""
+    """Inverse of :func:`config_to_dict` (unknown keys raise an OptionError).
+
+    The top-level ``device`` and ``dtype`` of older files are ignored: a fit runs on its
+    input's device and dtype.
+    """
 
     def build(cls, d):
         if not isinstance(d, dict):
@@ -254,4 +264,7 @@ def config_from_dict(data: dict) -> FitConfig:
             kw[k] = v
         return cls(**kw)
 
+    if isinstance(data, dict) and ("device" in data or "dtype" in data):
+        # config.json files written before dtype and device followed the input.
+        data = {k: v for k, v in data.items() if k not in ("device", "dtype")}
     return build(FitConfig, data)

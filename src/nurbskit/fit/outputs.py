@@ -40,8 +40,10 @@ def _floats(d: dict) -> dict:
 def fit_report(result: FitResult, *, distances: bool = False) -> dict:
     """The numbers of a fit, JSON-ready.
 
-    Keys: ``pipeline``, ``iterations``, ``seconds``, ``loop_seconds``,
-    ``seconds_per_iteration``, ``final_loss`` and ``final_parts`` (fit units),
+    Keys: ``pipeline``, ``dtype`` and ``device`` (those of the fit, the input's),
+    ``iterations``, ``seconds``, ``loop_seconds``,
+    ``seconds_per_iteration``, ``initial_loss`` (of the first gradient iteration),
+    ``final_loss`` and ``final_parts`` (fit units),
     ``closed_v``, ``metrics`` (input units) and ``metrics_normalized`` (the input and
     surface scaled to a unit bounding-box diagonal: the thesis's columns become
     comparable across shapes), and for supervised fits ``rms`` and
@@ -49,19 +51,22 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
     ``distances=True`` the per-point distances (a tensor) come under ``_distances``.
     """
     cfg = result.config
-    s = result.surface
-    pts = result.points.to(torch.float64)
+    # The report is measured in float64 on the CPU, whatever the fit ran in.
+    s = result.surface.to(dtype=torch.float64, device="cpu")
+    pts = result.points.detach().to(dtype=torch.float64, device="cpu")
     res = tuple(cfg.resolution)
     with torch.no_grad():
         m = metrics.evaluate_fit(s, pts, res)
-        center = result.center.to(torch.float64)
-        s_n = s.to(torch.float64)._replace(control_points=(s.control_points.double() - center) / result.scale)
+        center = result.center.to(dtype=torch.float64, device="cpu")
+        s_n = s._replace(control_points=(s.control_points - center) / result.scale)
         m_n = metrics.evaluate_fit(s_n, (pts - center) / result.scale, res)
     last = result.history[-1] if result.history else {}
     report = {
         "pipeline": cfg.pipeline,
         "supervised": cfg.supervised,
         "points": int(pts.shape[0]),
+        "dtype": str(result.surface.dtype).removeprefix("torch."),
+        "device": str(result.surface.control_points.device),
         "control_points": list(s.sizes),
         "degrees": list(s.degrees),
         "topology": result.topology.as_dict(),
@@ -70,6 +75,7 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
         "seconds": float(result.seconds),
         "loop_seconds": float(result.loop_seconds),
         "seconds_per_iteration": float(result.seconds_per_iteration),
+        "initial_loss": float(result.history[0]["loss"]) if result.history else None,
         "final_loss": float(last.get("loss", float("nan"))) if last else None,
         "final_parts": _floats(last.get("parts", {})) if last else {},
         "metrics": _floats(m),
@@ -77,15 +83,15 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
     }
     if result.target_grid is not None:
         with torch.no_grad():
-            grid = s.to(torch.float64).sample(tuple(result.target_grid.shape[:2]))
-            rms = float((grid - result.target_grid.double()).square().sum(-1).mean().sqrt())
+            grid = s.sample(tuple(result.target_grid.shape[:2]))
+            rms = float((grid - result.target_grid.to(dtype=torch.float64, device="cpu")).square().sum(-1).mean().sqrt())
         report["rms"] = rms
         report["rms_normalized"] = rms / result.scale
     if distances:
         from ..core.project import project_points
 
         with torch.no_grad():
-            report["_distances"] = project_points(s.to(torch.float64), pts).distance
+            report["_distances"] = project_points(s, pts).distance
     return report
 
 
@@ -107,13 +113,14 @@ def write_fit_outputs(
     d = Path(directory)
     rep = report if report is not None else fit_report(result, distances=figures)
     distances = rep.pop("_distances", None)
-    s = result.surface
+    s = result.surface.to(dtype=torch.float64, device="cpu")
+    points = result.points.detach().to(dtype=torch.float64, device="cpu")
     res = tuple(result.config.resolution)
     with torch.no_grad():
         grid = s.sample(res)
     save(s, d / "surface.json")
-    write_points(d / "points.off", grid.reshape(-1, 3).double().cpu().numpy())
-    write_points(d / "control_points.off", s.control_points.reshape(-1, 3).detach().double().cpu().numpy())
+    write_points(d / "points.off", grid.reshape(-1, 3).numpy())
+    write_points(d / "control_points.off", s.control_points.reshape(-1, 3).detach().numpy())
     with atomic_open(d / "config.json", "w") as fh:
         json.dump(config_to_dict(result.config), fh, indent=2)
     files = ["surface.json", "points.off", "control_points.off", "report.json", "config.json"]
@@ -124,12 +131,12 @@ def write_fit_outputs(
             from ..core.project import project_points
 
             with torch.no_grad():
-                distances = project_points(s.to(torch.float64), result.points.double()).distance
+                distances = project_points(s, points).distance
         name = result.config.pipeline
         plots.plot_wireframe(grid, d / "wireframe.png", title=f"{name}: output grid {res[0]} x {res[1]}")
-        plots.plot_clouds(result.points, grid, s.control_points, d / "clouds.png",
+        plots.plot_clouds(points, grid, s.control_points, d / "clouds.png",
                           title=f"{name}: input (blue), output (green), control net (red)")
-        plots.plot_error_map(result.points, distances, d / "error_map.png", scale=rep["metrics"]["diagonal"])
+        plots.plot_error_map(points, distances, d / "error_map.png", scale=rep["metrics"]["diagonal"])
         plots.plot_loss(result.history, d / "loss.png", result.alternation, title=f"{name}: loss")
         files += ["wireframe.png", "clouds.png", "error_map.png", "loss.png"]
     rep["files"] = files

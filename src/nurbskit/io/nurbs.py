@@ -3,8 +3,8 @@
 
 Conventions, settled here once:
 
-* ``.ctrlpts``: one Cartesian control point ``x y z`` per line, in geomdl order: for a
-  surface line ``iu * n_v + iv`` (v fastest); for a volume w outermost, then u, then v.
+* ``.ctrlpts``: one Cartesian control point ``x y z`` per line, in geomdl order (defined
+  in :mod:`nurbskit.core.serialize`, the one place that knows it).
 * ``.weights``: the weights in the same order, separated by commas (and/or whitespace,
   line breaks; a trailing comma is allowed).
 * ``.cptw``: one line per u index, control points separated by ``;``, each
@@ -36,7 +36,7 @@ import torch
 
 from .._fs import atomic_open
 from ..core.curve import NURBSCurve
-from ..core.serialize import from_dict, to_dict
+from ..core.serialize import from_dict, from_geomdl_order, save, to_geomdl_order
 from ..core.spline import TensorSpline
 from ..core.surface import NURBSSurface
 from ..core.volume import NURBSVolume
@@ -200,16 +200,9 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
 
 
 def _assemble(kind, points, weights, sizes, degrees, knots) -> TensorSpline:
-    """A spline from control points (and weights) flattened in geomdl order."""
+    """A spline from control points (and weights) flattened in geomdl order (:func:`from_geomdl_order`)."""
     sizes = [int(s) for s in sizes]
-    dim = points.shape[-1]
-    if kind == "volume":
-        nu, nv, nw = sizes
-        cp = points.reshape(nw, nu, nv, dim).transpose(1, 2, 0, 3)
-        w = None if weights is None else weights.reshape(nw, nu, nv).transpose(1, 2, 0)
-    else:
-        cp = points.reshape(*sizes, dim)
-        w = None if weights is None else weights.reshape(*sizes)
+    cp, w = from_geomdl_order(points, weights, sizes)
     t = lambda a: None if a is None else torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float64)  # noqa: E731
     kvs = None if knots is None else [None if k is None else t(k) for k in knots]
     if kvs is not None and all(k is None for k in kvs):
@@ -224,13 +217,8 @@ def _assemble(kind, points, weights, sizes, degrees, knots) -> TensorSpline:
 
 
 def _flatten(obj: TensorSpline) -> tuple[np.ndarray, np.ndarray]:
-    """Control points ``(N, dim)`` and weights ``(N,)`` in geomdl order."""
-    cp = obj.control_points.detach().cpu().double().numpy()
-    w = obj.weights.detach().cpu().double().numpy()
-    if obj.kind == "volume":
-        cp = cp.transpose(2, 0, 1, 3)
-        w = w.transpose(2, 0, 1)
-    return cp.reshape(-1, cp.shape[-1]), w.reshape(-1)
+    """Control points ``(N, dim)`` and weights ``(N,)`` in geomdl order (:func:`to_geomdl_order`)."""
+    return to_geomdl_order(obj.control_points, obj.weights)
 
 
 # ---- control-point text files -------------------------------------------------------
@@ -407,9 +395,9 @@ def _read_smesh(path: Path) -> TensorSpline:
         raise InputError(f"{path}: smesh control point lines must each be 'x y z w'") from None
     if table.ndim != 2 or table.shape[1] != 4:
         raise InputError(f"{path}: smesh control point lines must each be 'x y z w'")
-    # file order: u fastest; geomdl order: v fastest
-    table = table.reshape(nv, nu, 4).transpose(1, 0, 2).reshape(-1, 4)
-    return _assemble("surface", table[:, :3], table[:, 3], [nu, nv], [p, q], [ku, kv])
+    # file order: u fastest, i.e. the lines are the (n_v, n_u) table of the (u, v) net transposed
+    table = table.reshape(nv, nu, 4).transpose(1, 0, 2)
+    return _assemble("surface", *to_geomdl_order(table[..., :3], table[..., 3]), [nu, nv], [p, q], [ku, kv])
 
 
 # ---- writing ------------------------------------------------------------------------
@@ -439,8 +427,7 @@ def write_nurbs(path: str | os.PathLike, obj: TensorSpline, *, format: str | Non
             f"{path}: cannot write NURBS as {ext or '(no extension)'!r}; use .json, .ctrlpts, .cptw, .smesh/.dat or .3dm"
         )
     if fmt == "nurbskit":
-        with atomic_open(path, "w") as handle:
-            json.dump(to_dict(obj), handle)
+        save(obj, path)
         return [path]
     if fmt == "geomdl":
         with atomic_open(path, "w") as handle:

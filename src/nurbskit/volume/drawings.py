@@ -32,6 +32,32 @@ MIN_CONTRAST = 0.05
 MAX_SIDE = 1024
 
 
+def max_pixels() -> int:
+    """The largest drawing, in pixels: Pillow's decompression-bomb limit (``Image.MAX_IMAGE_PIXELS``)."""
+    from PIL import Image
+
+    return int(Image.MAX_IMAGE_PIXELS or 89_478_485)
+
+
+def check_pixels(size: tuple[int, int], label: str) -> None:
+    """Refuse an image of ``size (width, height)`` beyond :func:`max_pixels`, before it is decoded.
+
+    A small file can declare a huge image (a decompression bomb); decoding it would take
+    gigabytes. The check also covers the memory the decoded image needs.
+    """
+    from .._budget import require_memory
+
+    width, height = size
+    pixels = int(width) * int(height)
+    if pixels > max_pixels():
+        raise InputError(
+            f"{label}: the image declares {width} x {height} = {pixels:,} pixels, more than the "
+            f"{max_pixels():,} allowed (Pillow's decompression-bomb limit); scale it down"
+        )
+    # RGBA decoding, the gray levels (float64) and the mask (float32).
+    require_memory(pixels * 16, f"{label} ({width} x {height} pixels)", "scale the image down")
+
+
 def _otsu(gray: np.ndarray) -> float:
     """Otsu's threshold of a gray image in [0, 1] (256 bins)."""
     hist, edges = np.histogram(gray, bins=256, range=(0.0, 1.0))
@@ -116,9 +142,12 @@ def load_drawing(source: DrawingLike, *, name: str = "drawing") -> Tensor:
         if path.is_dir():
             raise InputError(f"{label}: expected an image file, found a directory")
         try:
-            with Image.open(path) as image:
+            with Image.open(path) as image:  # reads the header only
+                check_pixels(image.size, label)
                 image.load()
                 gray = _gray_from_pil(image, label)
+        except Image.DecompressionBombError:
+            raise InputError(f"{label}: the image declares more than {2 * max_pixels():,} pixels (Pillow's limit)") from None
         except (UnidentifiedImageError, OSError, SyntaxError) as exc:
             raise InputError(f"{label}: cannot be read as an image (PNG or JPEG expected): {exc}") from None
         return torch.from_numpy(_shrink(mask_from_gray(gray, label)))

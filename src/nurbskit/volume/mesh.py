@@ -1,4 +1,6 @@
-"""Isosurfaces of a sampled field, their projections, and small OBJ / PLY writers.
+"""Isosurfaces of a sampled field and their projections.
+
+Meshes are written by :func:`nurbskit.io.write_mesh` (``write_mesh(path, mesh.vertices, mesh.faces)``).
 
 Convention: meshes are in unit-cube coordinates (see :mod:`nurbskit.volume.views`),
 vertices ``(V, 3)`` float64 as ``(x, y, z)``, faces ``(F, 3)`` int64, counter-clockwise
@@ -7,13 +9,11 @@ seen from outside (outward normals by the right-hand rule).
 
 from __future__ import annotations
 
-import os
 from typing import NamedTuple
 
 import numpy as np
 import torch
 
-from .._fs import atomic_open
 from ..errors import NurbskitError
 from .views import View, points_to_pixels
 
@@ -123,50 +123,3 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     b = np.asarray(b, bool)
     union = np.logical_or(a, b).sum()
     return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
-
-
-def write_obj(path: str | os.PathLike, mesh: Mesh) -> None:
-    """Wavefront OBJ (``v`` and 1-based ``f`` lines), written atomically."""
-    with atomic_open(path, "w", encoding="ascii", newline="\n") as fh:
-        fh.write("# nurbskit volume isosurface, unit-cube coordinates\n")
-        if len(mesh.vertices):
-            np.savetxt(fh, mesh.vertices, fmt="v %.8g %.8g %.8g")
-        if len(mesh.faces):
-            np.savetxt(fh, mesh.faces + 1, fmt="f %d %d %d")
-
-
-def write_ply(path: str | os.PathLike, mesh: Mesh) -> None:
-    """Binary little-endian PLY (float32 vertices, int32 triangle lists), written atomically."""
-    v = np.ascontiguousarray(mesh.vertices, dtype="<f4")
-    f = np.asarray(mesh.faces, dtype="<i4")
-    header = (
-        "ply\nformat binary_little_endian 1.0\ncomment nurbskit volume isosurface, unit-cube coordinates\n"
-        f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
-        f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
-    )
-    records = np.empty(len(f), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
-    records["n"] = 3
-    records["idx"] = f
-    with atomic_open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(v.tobytes())
-        fh.write(records.tobytes())
-
-
-def write_mesh(path: str | os.PathLike, mesh: Mesh) -> None:
-    """Write ``.obj`` or ``.ply`` by the file's suffix, preferring ``nurbskit.io.write_mesh`` when present."""
-    try:
-        from ..io import write_mesh as io_write_mesh  # the io developer's writer, when it exists
-    except ImportError:
-        io_write_mesh = None
-    if io_write_mesh is not None:
-        io_write_mesh(path, mesh.vertices, mesh.faces)
-        return
-    suffix = os.fspath(path).lower().rsplit(".", 1)[-1]
-    if suffix == "obj":
-        write_obj(path, mesh)
-    elif suffix == "ply":
-        write_ply(path, mesh)
-    else:
-        raise NurbskitError(f"mesh file {path}: expected a .obj or .ply name")
-
