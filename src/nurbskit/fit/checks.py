@@ -123,7 +123,7 @@ def check_resolution(resolution: tuple[int, int], item: int = 8, *, budget: floa
 
 def _distance_to(surface: NURBSSurface, points: Tensor) -> float:
     """Mean squared distance from ``points (N, 3)`` to the nearest sample of the surface."""
-    from ..geometry.neighbors import nearest_neighbors
+    from ..core.neighbors import nearest_neighbors
 
     with torch.no_grad():
         grid = surface.sample((CHECK_RESOLUTION, CHECK_RESOLUTION)).reshape(-1, points.shape[-1])
