@@ -321,6 +321,8 @@ def nonfinite_rows(array: np.ndarray) -> np.ndarray:
 
 def check_finite(path: Path, array: np.ndarray, what: str) -> None:
     """InputError naming the first row with a NaN or infinite value."""
+    if array.size == 0:
+        return
     bad = nonfinite_rows(array.reshape(array.shape[0], -1))
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
@@ -330,10 +332,36 @@ def check_finite(path: Path, array: np.ndarray, what: str) -> None:
         )
 
 
-def colors_to_uint8(values: np.ndarray) -> np.ndarray:
-    """Colours as uint8: integer types clipped to 0..255, floats in [0, 1] scaled by 255."""
+def integers(path: Path, values, what: str) -> np.ndarray:
+    """``values`` as int64, or an InputError when one is not a whole number int64 can hold.
+
+    Text readers parse every column as float64; a face index or a label read as NaN,
+    2.5 or 1e30 must not be cast silently (numpy turns them into garbage integers).
+    """
+    arr = np.asarray(values)
+    if arr.dtype.kind in "iub":
+        if arr.dtype == np.uint64 and arr.size and int(arr.max()) >= 2**63:
+            raise InputError(f"{path}: {what} must be integers below 2^63, found {int(arr.max())}")
+        return arr.astype(np.int64)
+    if arr.dtype.kind != "f":
+        raise InputError(f"{path}: {what} must be integers, found values of type {arr.dtype}")
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(arr) | (arr != np.rint(arr)) | (np.abs(arr) >= 2.0**63)
+    if bad.any():
+        raise InputError(f"{path}: {what} must be integers, found {arr[bad].flat[0]!r}")
+    return arr.astype(np.int64)
+
+
+def colors_to_uint8(values: np.ndarray, path: Path | None = None) -> np.ndarray:
+    """Colours as uint8: integer types clipped to 0..255, floats in [0, 1] scaled by 255.
+
+    NaN or infinite colours are an InputError (naming ``path``), not a silent 0.
+    """
     values = np.asarray(values)
     if values.dtype.kind == "f":
+        if values.size and not np.isfinite(values).all():
+            where = f"{path}: " if path is not None else ""
+            raise InputError(f"{where}colours contain NaN or infinite values")
         if values.size and np.nanmax(values) <= 1.0:
             values = values * 255.0
         return np.clip(np.rint(values), 0, 255).astype(np.uint8)

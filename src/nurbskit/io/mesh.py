@@ -33,6 +33,8 @@ def read_mesh(path: str | os.PathLike, *, format: str | None = None) -> Mesh:
     """
     path = Path(path)
     payload = read_payload(path, format)
+    if payload.points.shape[0] == 0:
+        raise InputError(f"{path}: the file holds no points and no faces")
     if payload.faces is None or payload.faces.shape[0] == 0:
         raise InputError(
             f"{path}: has {payload.points.shape[0]:,} points and no faces; it is a point cloud (use read_points)"

@@ -7,14 +7,16 @@ Pickled object arrays are refused (``allow_pickle=False``): a data file must not
 
 from __future__ import annotations
 
+import math
 import os
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from .._fs import atomic_path
-from ._base import InputError, Payload, check_fits, colors_to_uint8
+from ._base import InputError, Payload, check_fits, colors_to_uint8, integers
 
 
 def _header_shape(path: Path):
@@ -36,7 +38,7 @@ def _load_npy(path: Path) -> np.ndarray:
     shape, dtype, offset = _header_shape(path)
     if dtype.hasobject:
         raise InputError(f"{path}: .npy holds Python objects; only numeric arrays are read")
-    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    nbytes = math.prod(shape) * dtype.itemsize  # Python integers: a 2^63 dimension must not wrap around
     size = path.stat().st_size - offset
     if nbytes > size:
         raise InputError(
@@ -73,31 +75,33 @@ def read_npz(path: str | os.PathLike) -> Payload:
     path = Path(path)
     try:
         archive = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
         raise InputError(f"{path}: not a readable .npz archive ({exc})") from None
     with archive:
         names = set(archive.files)
         key = "points" if "points" in names else "vertices" if "vertices" in names else None
         if key is None:
             raise InputError(f"{path}: .npz has no 'points' or 'vertices' array (it has {sorted(names)})")
+        # the members' uncompressed sizes, as the archive declares them, must fit before any is read
+        check_fits(path, sum(info.file_size for info in archive.zip.infolist()), "the arrays")
         try:
             arrays = {name: archive[name] for name in names}
-        except ValueError as exc:
-            raise InputError(f"{path}: .npz array cannot be read without pickle ({exc})") from None
+        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+            raise InputError(f"{path}: a .npz array cannot be read ({type(exc).__name__}: {exc})") from None
     points = np.ascontiguousarray(_table(path, arrays[key], key, (3,)), dtype=np.float64)
     n = points.shape[0]
     normals = colors = labels = faces = None
     if "normals" in arrays:
         normals = np.ascontiguousarray(_table(path, arrays["normals"], "normals", (3,)), dtype=np.float64)
     if "colors" in arrays:
-        colors = colors_to_uint8(_table(path, arrays["colors"], "colors", (3, 4)))
+        colors = colors_to_uint8(_table(path, arrays["colors"], "colors", (3, 4)), path)
     if "labels" in arrays:
-        labels = np.asarray(arrays["labels"]).reshape(-1).astype(np.int64)
+        labels = integers(path, np.asarray(arrays["labels"]).reshape(-1), "labels")
     if "faces" in arrays:
         f = _table(path, arrays["faces"], "faces", (3,))
         if f.dtype.kind not in "iu":
             raise InputError(f"{path}: faces must be integers, got dtype {f.dtype}")
-        faces = f.astype(np.int64)
+        faces = integers(path, f, "faces")
     for name, value in (("normals", normals), ("colors", colors), ("labels", labels)):
         if value is not None and value.shape[0] != n:
             raise InputError(f"{path}: '{name}' has {value.shape[0]} rows but there are {n} points")

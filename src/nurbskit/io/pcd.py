@@ -22,13 +22,15 @@ import numpy as np
 
 from .._fs import atomic_open
 from ._base import (
-    InputError, Lines, Payload, check_declared, check_fits, clean_text, columns_to_float64, parse_table, read_bytes,
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, columns_to_float64, integers, parse_table,
+    read_bytes,
 )
 from .lzf import LZFError, compress_literal, decompress
 from .text import format_rows
 
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 _KIND = {"F": "f", "I": "i", "U": "u"}
+_MAX_COUNT = 1 << 16  # values per field and point (PCL's largest descriptors have a few hundred)
 
 
 def _parse_header(path: Path, data: bytes):
@@ -71,14 +73,16 @@ def _parse_header(path: Path, data: bytes):
         counts_i = [int(c) for c in counts]
     except (ValueError, IndexError):
         raise InputError(f"{path}: PCD header has a WIDTH, HEIGHT, POINTS, SIZE or COUNT that is not an integer") from None
+    if min(width, height, points) < 0:
+        raise InputError(f"{path}: PCD header has a negative WIDTH, HEIGHT or POINTS ({width}, {height}, {points})")
     if points != width * height:
         raise InputError(f"{path}: PCD header says POINTS {points:,} but WIDTH x HEIGHT = {width} x {height} = {width * height:,}")
     dtypes = []
     for name, size, kind, count in zip(fields, sizes_i, types, counts_i):
         if kind.upper() not in _KIND or size not in (1, 2, 4, 8) or (kind.upper() == "F" and size not in (4, 8)):
             raise InputError(f"{path}: PCD field {name!r} has unsupported TYPE {kind} SIZE {size}")
-        if count < 1:
-            raise InputError(f"{path}: PCD field {name!r} has COUNT {count}")
+        if not 1 <= count <= _MAX_COUNT:
+            raise InputError(f"{path}: PCD field {name!r} has COUNT {count}; expected 1 to {_MAX_COUNT:,}")
         dtypes.append((name, np.dtype(f"<{_KIND[kind.upper()]}{size}"), count))
     mode = header["DATA"][0].lower() if header["DATA"] else ""
     if mode not in ("ascii", "binary", "binary_compressed"):
@@ -145,7 +149,7 @@ def read_pcd(path: str | os.PathLike) -> Payload:
         if lines.count != n:
             raise InputError(f"{path}: PCD header declares {n:,} points but {lines.count:,} data lines follow")
         width_cols = sum(count for _, _, count in dtypes)
-        table = parse_table(path, body, n, "point lines")
+        table = parse_table(path, body, n, "point lines") if n else np.zeros((0, width_cols))
         if n and table.shape[1] != width_cols:
             raise InputError(f"{path}: PCD point lines have {table.shape[1]} values, the FIELDS need {width_cols}")
         col = 0
@@ -154,8 +158,16 @@ def read_pcd(path: str | os.PathLike) -> Payload:
             if name in ("rgb", "rgba"):
                 # ASCII PCD writes packed colours as a float (rgb) or an integer (rgba)
                 vals = vals.astype(np.float32).view(np.uint32) if dt.kind == "f" else vals.astype(np.uint32)
-            else:  # the declared type: a float32 field printed in decimal reads back as that float32
+            elif dt.kind in "iu":  # the declared integer type, checked: NaN or 1e30 must not wrap around
+                vals = integers(path, vals, f"the '{name}' values")
+                info = np.iinfo(dt)
+                if vals.size and (vals.min() < info.min or vals.max() > info.max):
+                    raise InputError(f"{path}: a '{name}' value does not fit the declared TYPE {dt.kind.upper()} "
+                                     f"SIZE {dt.itemsize} ({info.min} to {info.max})")
                 vals = vals.astype(dt)
+            else:  # the declared type: a float32 field printed in decimal reads back as that float32
+                with np.errstate(over="ignore"):
+                    vals = vals.astype(dt)
             columns[name] = vals[:, 0] if count == 1 else vals
             col += count
     for axis in "xyz":

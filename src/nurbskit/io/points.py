@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
-from ._base import PointCloud, as_attribute, as_points, check_finite, nonfinite_rows
+from ._base import InputError, PointCloud, as_attribute, as_points, check_finite, nonfinite_rows
 from .formats import POINT_WRITE, read_payload
 
 NONFINITE = ("drop", "error", "keep")
@@ -51,6 +51,8 @@ def cloud_from_payload(path: Path, payload, nonfinite: str | None = None) -> Poi
         nonfinite = "drop" if payload.info.get("format", "").startswith("pcd") else "error"
     points, normals, colors, labels = payload.points, payload.normals, payload.colors, payload.labels
     dropped = payload.dropped
+    if points.shape[0] == 0:
+        raise InputError(f"{path}: the file holds no points ({payload.info.get('format', 'its header')} declares none)")
     if nonfinite == "error":
         check_finite(path, points, "points")
     elif nonfinite == "drop":
@@ -61,6 +63,8 @@ def cloud_from_payload(path: Path, payload, nonfinite: str | None = None) -> Poi
             normals = None if normals is None else normals[keep]
             colors = None if colors is None else colors[keep]
             labels = None if labels is None else labels[keep]
+        if points.shape[0] == 0:
+            raise InputError(f"{path}: the file holds no points: all {dropped:,} have NaN coordinates")
     return PointCloud(np.ascontiguousarray(points, dtype=np.float64), normals, colors, labels, dropped, path)
 
 

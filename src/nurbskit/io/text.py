@@ -25,7 +25,8 @@ import numpy as np
 
 from .._fs import atomic_open
 from ._base import (
-    InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, parse_table, read_bytes,
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, integers, parse_table,
+    read_bytes,
 )
 
 TEXT_EXTENSIONS = (".xyz", ".txt", ".csv", ".xyzc", ".pts", ".xyzn", ".asc")
@@ -138,13 +139,9 @@ def read_text_points(path: str | os.PathLike) -> Payload:
     if "normals" in layout:
         normals = np.ascontiguousarray(table[:, 3:6])
     if "label" in layout:
-        col = table[:, -1]
-        if not np.all(np.isfinite(col)) or np.any(col != np.rint(col)):
-            bad = int(np.flatnonzero(~np.isfinite(col) | (col != np.rint(col)))[0])
-            raise InputError(f"{path}: the label column must hold integers; line {bad + 1} has {col[bad]!r}")
-        labels = col.astype(np.int64)
+        labels = integers(path, table[:, -1], "the label column's values")
     if "rgb" in layout:
-        colors = colors_to_uint8(table[:, -3:].astype(np.int64))
+        colors = colors_to_uint8(integers(path, table[:, -3:], "the colour columns' values"))
     return Payload(points, None, normals, colors, labels, info={"format": f"text ({layout})"})
 
 
