@@ -13,6 +13,7 @@ CI runs the corpus derandomized and small; ``make fuzz`` runs 100x the hypothesi
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import re
 import struct
@@ -149,9 +150,18 @@ def _check_mesh(mesh) -> None:
         assert mesh.faces.min() >= 0 and mesh.faces.max() < mesh.vertices.shape[0]
 
 
-def survives(path: Path, data: bytes) -> None:
-    """Every reader on ``data`` (named like ``path``): a consistent result or a NurbskitError."""
-    path.write_bytes(data)
+_FRESH = itertools.count()
+
+
+def survives(path: Path, data: bytes | None) -> None:
+    """Every reader on ``data`` (named like ``path``): a consistent result or a NurbskitError.
+
+    Each mutant goes to a fresh file beside ``path`` (rewriting one file in place is ten
+    times slower on ext4); ``data=None`` reads ``path`` as it is.
+    """
+    if data is not None:
+        path = path.with_name(f"m{next(_FRESH)}-{path.name}")
+        path.write_bytes(data)
     if path.suffix == ".json" or path.suffix == ".ctrlpts":
         calls = [lambda: read_nurbs(path), lambda: describe(path)]
     else:  # read_mesh only where the seed has faces: for the others it differs only in the last check
@@ -170,7 +180,7 @@ def survives(path: Path, data: bytes) -> None:
 COUNTS = ("0", "-1", str(2**31), str(2**63), "4000000000", "1000000000000", "1e12", "x")
 
 
-def truncations(data: bytes, limit: int = 300):
+def truncations(data: bytes, limit: int = 250):
     step = 1 if len(data) <= limit else max(1, len(data) // limit)
     return [data[:i] for i in range(0, len(data), step)]
 
@@ -266,7 +276,7 @@ def deep_json(depth: int) -> bytes:
 def json_mutants(name: str, data: bytes) -> list[bytes]:
     obj = json.loads(data)
     out = [deep_json(100_000), b"[" * 100_000, b'{"shape": ' + b"{" * 50_000, b"{}", b"[]", b"1", b"null"]
-    scalars = (0, -1, 2**31, 2**63, 1e308, -2.5, "x", None, [], {}, [[]], [1, 2], True)
+    scalars = (0, -1, 2**63, 1e308, "x", None, [], {}, [[]])
 
     def walk(node, path=()):
         yield path
@@ -344,7 +354,7 @@ def test_ctrlpts_and_side_json_mutants(tmp_path):
     assert read_nurbs(path).sizes == (2, 2)
     for mutant in json_mutants("side.json", _SIDE) + truncations(_SIDE):
         side.write_bytes(mutant)
-        survives(path, _CTRLPTS)
+        survives(path, None)
     side.unlink()
     for sizes in ([-1, -4], [0, 0], [2**31, 2], ["a", 2], [2.5, 2], [[2], 2], [2**63, 2**63]):
         for degrees in ([1, 1], [-1, 1], [2**31, 1]):
@@ -508,7 +518,7 @@ def edited(draw):
     return name, bytes(data)
 
 
-@settings(max_examples=examples(150))
+@settings(max_examples=examples(100))
 @given(edited())
 @example(("binary.ply", _ply_binary().replace(b"uchar int vertex_indices", b"int int vertex_indices")))
 def test_random_edits(tmp_path_factory, case):
