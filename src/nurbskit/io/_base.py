@@ -341,14 +341,14 @@ def integers(path: Path, values, what: str) -> np.ndarray:
     arr = np.asarray(values)
     if arr.dtype.kind in "iub":
         if arr.dtype == np.uint64 and arr.size and int(arr.max()) >= 2**63:
-            raise InputError(f"{path}: {what} must be integers below 2^63, found {int(arr.max())}")
+            raise InputError(f"{path}: {what} must hold integers below 2^63, found {int(arr.max())}")
         return arr.astype(np.int64)
     if arr.dtype.kind != "f":
-        raise InputError(f"{path}: {what} must be integers, found values of type {arr.dtype}")
+        raise InputError(f"{path}: {what} must hold integers, found values of type {arr.dtype}")
     with np.errstate(invalid="ignore"):
         bad = ~np.isfinite(arr) | (arr != np.rint(arr)) | (np.abs(arr) >= 2.0**63)
     if bad.any():
-        raise InputError(f"{path}: {what} must be integers, found {arr[bad].flat[0]!r}")
+        raise InputError(f"{path}: {what} must hold integers, found {arr[bad].flat[0]!r}")
     return arr.astype(np.int64)
 
 

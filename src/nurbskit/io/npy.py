@@ -108,13 +108,13 @@ def read_npz(path: str | os.PathLike) -> Payload:
     return Payload(points, faces, normals, colors, labels, info={"format": "npz", "arrays": sorted(names)})
 
 
-def write_npy(path, points, normals=None, colors=None, labels=None) -> list[str]:
+def write_npy(path, points, faces=None, normals=None, colors=None, labels=None) -> list[str]:
     """Write ``(N, 3)`` (or ``(N, 6)`` with normals) float64 to ``.npy``, atomically."""
     arr = points if normals is None else np.concatenate([points, normals], axis=1)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, arr)
-    return [n for n, v in (("colors", colors), ("labels", labels)) if v is not None]
+    return [n for n, v in (("faces", faces), ("colors", colors), ("labels", labels)) if v is not None]
 
 
 def write_npz(path, points, faces=None, normals=None, colors=None, labels=None) -> list[str]:

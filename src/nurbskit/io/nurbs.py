@@ -190,7 +190,7 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
         raise InputError(f"{path}: geomdl JSON {kind} lacks the field {exc.args[0]!r}") from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"{path}: geomdl JSON has a malformed field ({exc})") from None
-    if points.ndim != 2 or points.shape[1] < 1 or min(sizes) < 1 or min(degrees) < 1:
+    if points.ndim < 2 or points.shape[-1] < 1 or min(sizes) < 1 or min(degrees) < 1:
         raise InputError(f"{path}: geomdl JSON needs points (N, dim), sizes and degrees >= 1; found points "
                          f"of shape {points.shape}, sizes {sizes}, degrees {degrees}")
     dim = points.shape[-1]

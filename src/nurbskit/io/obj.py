@@ -125,7 +125,7 @@ def _faces(path, data, f_lines, nv, vn):
     return tri, normals
 
 
-def write_obj(path, points, faces=None, normals=None, colors=None, *, precision: int = 17) -> list[str]:
+def write_obj(path, points, faces=None, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
     """Write OBJ (``v``, ``vn`` one per vertex, ``f a//a b//b c//c`` when normals exist), atomically."""
     cols, kinds = [points[:, 0], points[:, 1], points[:, 2]], "fff"
     if colors is not None:
@@ -144,7 +144,8 @@ def write_obj(path, points, faces=None, normals=None, colors=None, *, precision:
             else:
                 rows = format_rows([f[:, 0], f[:, 1], f[:, 2]], "ddd")
             handle.write(_prefixed(b"f ", rows))
-    return ["alpha"] if colors is not None and colors.shape[1] == 4 else []
+    left = ["alpha"] if colors is not None and colors.shape[1] == 4 else []
+    return left + (["labels"] if labels is not None else [])
 
 
 def _prefixed(prefix: bytes, rows: bytes) -> bytes:

@@ -126,10 +126,10 @@ def _read_faces(path: Path, lines: Lines, row: int, nf: int) -> np.ndarray:
     return fan_triangulate(np.array(counts, dtype=np.int64), np.array(flat, dtype=np.int64))
 
 
-def write_off(path, points, faces=None, normals=None, colors=None, *, precision: int = 17) -> list[str]:
+def write_off(path, points, faces=None, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
     """Write OFF (NOFF when normals are given, COFF/CNOFF with colours), atomically.
 
-    Returns the attributes the format could not store (none: labels are not part of OFF).
+    Returns the attributes the format could not store (labels are not part of OFF).
     """
     keyword = ("C" if colors is not None else "") + ("N" if normals is not None else "") + "OFF"
     nf = 0 if faces is None else faces.shape[0]
@@ -145,4 +145,4 @@ def write_off(path, points, faces=None, normals=None, colors=None, *, precision:
         handle.write(format_rows(cols, kinds, precision))
         if nf:
             handle.write(format_rows([np.full(nf, 3), faces[:, 0], faces[:, 1], faces[:, 2]], "dddd"))
-    return []
+    return ["labels"] if labels is not None else []

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import (
     InputError, Lines, Payload, check_declared, check_faces, check_fits, clean_text,
     colors_to_uint8, columns_to_float64, fan_triangulate, integers, parse_table, read_bytes,
@@ -403,13 +404,19 @@ def read_ply(path: str | os.PathLike) -> Payload:
 
 # ---- writing ------------------------------------------------------------------------
 
-def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, *, binary: bool = True) -> None:
+def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, *, binary: bool = True) -> list[str]:
     """Write a PLY file (binary little endian by default, ``binary=False`` for ASCII), atomically.
 
     ``points (N, 3)`` as double, ``normals (N, 3)`` as nx ny nz (double), ``colors (N, 3|4)`` as
     uchar red green blue [alpha], ``labels (N,)`` as int label, ``faces (F, 3)`` as a uchar/int list.
+    PLY's widest integer is 32 bits: labels or vertex indices beyond it are refused, not wrapped.
     """
     n = points.shape[0]
+    if labels is not None and labels.size and (labels.min() < -(2**31) or labels.max() >= 2**31):
+        bad = int(labels.min()) if labels.min() < -(2**31) else int(labels.max())
+        raise OptionError(f"{path}: label {bad} does not fit PLY's 32-bit int; PLY has no wider integer type")
+    if faces is not None and n > 2**31 - 1:
+        raise OptionError(f"{path}: {n:,} vertices cannot be indexed by PLY's 32-bit int faces")
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f8"), ("ny", "<f8"), ("nz", "<f8")]
@@ -434,8 +441,6 @@ def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, 
         for i, c in enumerate(("red", "green", "blue", "alpha")[: colors.shape[1]]):
             rec[c] = colors[:, i]
     if labels is not None:
-        if labels.size and (labels.min() < -(2**31) or labels.max() >= 2**31):
-            raise InputError("labels do not fit a 32-bit PLY int")
         rec["label"] = labels
     with atomic_open(path, "wb") as handle:
         handle.write(head)
@@ -454,3 +459,4 @@ def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, 
             handle.write(format_rows(cols, kinds))
             if faces is not None:
                 handle.write(format_rows([np.full(nf, 3), faces[:, 0], faces[:, 1], faces[:, 2]], "dddd"))
+    return []

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import (
     InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, integers, parse_table,
     read_bytes,
@@ -139,13 +140,14 @@ def read_text_points(path: str | os.PathLike) -> Payload:
     if "normals" in layout:
         normals = np.ascontiguousarray(table[:, 3:6])
     if "label" in layout:
-        labels = integers(path, table[:, -1], "the label column's values")
+        labels = integers(path, table[:, -1], "the label column")
     if "rgb" in layout:
-        colors = colors_to_uint8(integers(path, table[:, -3:], "the colour columns' values"))
+        colors = colors_to_uint8(integers(path, table[:, -3:], "the colour columns"))
     return Payload(points, None, normals, colors, labels, info={"format": f"text ({layout})"})
 
 
-def write_text_points(path, points, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
+def write_text_points(path, points, faces=None, normals=None, colors=None, labels=None, *,
+                      precision: int = 17) -> list[str]:
     """Write a text point file by extension (see the module table); returns attributes left out."""
     path = Path(path)
     ext = path.suffix.lower()
@@ -154,7 +156,7 @@ def write_text_points(path, points, normals=None, colors=None, labels=None, *, p
     delimiter = "," if ext == ".csv" else " "
     if ext == ".xyzc":
         if labels is None:
-            raise InputError(f"{path}: .xyzc needs a label per point; none were given")
+            raise OptionError(f"{path}: .xyzc needs a label per point; none were given")
         cols.append(labels)
         kinds += "d"
         left_out = [n for n, v in (("normals", normals), ("colors", colors)) if v is not None]
@@ -178,4 +180,4 @@ def write_text_points(path, points, normals=None, colors=None, labels=None, *, p
     with atomic_open(path, "wb") as handle:
         handle.write(head)
         handle.write(format_rows(cols, kinds, precision, delimiter))
-    return left_out
+    return (["faces"] if faces is not None else []) + left_out
