@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import sys
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,7 +61,8 @@ class PointCloud:
 
 @dataclass(eq=False)
 class Mesh:
-    """A triangle mesh read from a file.
+    """A triangle mesh: the one mesh type of the package (readers return it, writers and
+    the volume pipeline take it).
 
     Attributes:
         vertices: ``(V, 3)`` float64.
@@ -88,6 +90,16 @@ class Mesh:
     @property
     def num_faces(self) -> int:
         return int(self.faces.shape[0])
+
+    @property
+    def is_empty(self) -> bool:
+        """True for a mesh without faces (e.g. an isosurface of a field below its isovalue)."""
+        return self.num_faces == 0
+
+    @classmethod
+    def empty(cls) -> "Mesh":
+        """A mesh with no vertices and no faces."""
+        return cls(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
 
 
 @dataclass(eq=False)
@@ -368,15 +380,21 @@ def colors_to_uint8(values: np.ndarray, path: Path | None = None) -> np.ndarray:
     return np.clip(values, 0, 255).astype(np.uint8)
 
 
+def to_numpy(values):
+    """A torch tensor as a numpy array (detached, on the CPU); anything else unchanged.
+
+    torch is looked up among the loaded modules, not imported: a tensor can only exist
+    once torch is loaded, and the io layer stays importable without paying for torch.
+    """
+    torch = sys.modules.get("torch")
+    if torch is not None and isinstance(values, torch.Tensor):
+        return values.detach().cpu().numpy()
+    return values
+
+
 def as_points(points, what: str = "points") -> np.ndarray:
     """Validate an ``(N, 3)`` array given to a writer; returns float64 contiguous."""
-    try:
-        import torch
-
-        if isinstance(points, torch.Tensor):
-            points = points.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    points = to_numpy(points)
     arr = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise OptionError(f"{what} must have shape (N, 3), got {arr.shape}")
@@ -387,13 +405,7 @@ def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype)
     """Validate an optional per-point attribute for a writer (None passes through)."""
     if values is None:
         return None
-    try:
-        import torch
-
-        if isinstance(values, torch.Tensor):
-            values = values.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    values = to_numpy(values)
     arr = np.asarray(values)
     if cols is None:
         if arr.shape != (n,):
@@ -411,13 +423,7 @@ def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype)
 
 def as_faces(faces, num_vertices: int) -> np.ndarray:
     """Validate ``(F, 3)`` triangle indices for a writer."""
-    try:
-        import torch
-
-        if isinstance(faces, torch.Tensor):
-            faces = faces.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    faces = to_numpy(faces)
     arr = np.asarray(faces)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise OptionError(f"faces must have shape (F, 3), got {arr.shape}")
