@@ -133,12 +133,26 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit:
         raise
     except BaseException as exc:  # the last line of defence: a bug, said in one line
+        if _caused_by_interrupt(exc):  # e.g. numpy turns Ctrl-C during its import into an ImportError
+            _say(f"{command}: interrupted; no partial output was left behind")
+            return EXIT_INTERRUPTED
         if debug:
             traceback.print_exc()
         where = _input_of(args) if args is not None else None
         _say(f"{command}: error: {where + ': ' if where else ''}unexpected {type(exc).__name__}: {_one_line(exc)}"
              + ("" if debug else "; run with --debug for the details"))
         return EXIT_BUG
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is somewhere in the exception's chain of causes."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _one_line(exc: BaseException) -> str:
