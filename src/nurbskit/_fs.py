@@ -230,18 +230,30 @@ def _folder_lock(folder: Path) -> Iterator[None]:
 
 @contextlib.contextmanager
 def _interrupts_held() -> Iterator[None]:
-    """Hold Ctrl-C back for the duration (main thread only); raise it afterwards."""
+    """Hold Ctrl-C and SIGTERM back for the duration (main thread only); deliver them afterwards.
+
+    The final move of a run's files takes milliseconds; a signal in the middle of it would
+    leave the previous run's and this run's files mixed.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    caught = []
-    previous = signal.signal(signal.SIGINT, lambda *_: caught.append(True))
+    caught: list[int] = []
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(ValueError, OSError):
+            previous[signum] = signal.signal(signum, lambda n, _frame: caught.append(n))
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        raise KeyboardInterrupt
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    for signum in dict.fromkeys(caught):
+        handler = previous.get(signum)
+        if callable(handler):
+            handler(signum, None)  # Python's own SIGINT handler raises KeyboardInterrupt here
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(signum)
 
 
 def _commit(staging: Path, folder: Path, overwrite: bool, inputs, option: str) -> list[str]:
