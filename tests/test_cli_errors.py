@@ -238,3 +238,15 @@ def test_out_dot_with_overwrite_in_a_folder_nurbskit_wrote(tmp_path, capsys):
         os.chdir(cwd)
     assert sorted(p.name for p in work.iterdir()) == [MANIFEST, "b.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["work"]
+
+
+def test_sample_refuses_too_many_points_and_its_own_input(tmp_path, capsys):
+    mesh = tmp_path / "t.off"
+    mesh.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    before = mesh.read_bytes()
+    rc, _, err = run(capsys, "sample", mesh, "-n", 10**13, "-o", tmp_path / "s.ply")
+    assert rc == 2 and "samples fit" in err and err.count("\n") == 1
+    rc, _, err = run(capsys, "sample", mesh, "-n", 10, "-o", mesh)
+    assert rc == 2 and "is the input file" in err
+    assert mesh.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.off"]
