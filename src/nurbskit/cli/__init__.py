@@ -14,7 +14,9 @@ import argparse
 import contextlib
 import importlib
 import os
+import signal
 import sys
+import threading
 import traceback
 
 from ..errors import NurbskitError
@@ -80,8 +82,12 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised like Ctrl-C so that the same clean-up removes partial outputs."""
 
 
-def _raise_terminated(signum, frame):  # noqa: ARG001 - signal handler signature
-    raise Terminated
+_RECEIVED: list[int] = []  # signals that arrived during main(): a library may wrap what they raise
+
+
+def _on_signal(signum, frame):  # noqa: ARG001 - signal handler signature
+    _RECEIVED.append(signum)
+    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,12 +99,21 @@ def main(argv: list[str] | None = None) -> int:
     ``--debug`` or ``NURBSKIT_DEBUG=1``); 130 Ctrl-C and 143 SIGTERM, at any moment,
     with no partial output and no traceback.
     """
-    import signal
-    import threading
-
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        with contextlib.suppress(ValueError, OSError):
-            signal.signal(signal.SIGTERM, _raise_terminated)
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(ValueError, OSError):
+                previous[signum] = signal.signal(signum, _on_signal)
+    _RECEIVED.clear()
+    try:
+        return _main(argv)
+    finally:
+        for signum, handler in previous.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(signum, handler)
+
+
+def _main(argv: list[str] | None) -> int:
     command = "nurbskit"
     args = None
     debug = os.environ.get("NURBSKIT_DEBUG", "") not in ("", "0")
@@ -113,9 +128,13 @@ def main(argv: list[str] | None = None) -> int:
         command = f"nurbskit {args.command}"
         return int(args.run(args) or 0)
     except NurbskitError as exc:
+        if _RECEIVED:
+            return _signalled(command)
         _say(f"{command}: error: {_one_line(exc)}")
         return EXIT_USER_ERROR
     except OSError as exc:  # disk full, permission denied: the OS's own words, one line
+        if _RECEIVED:
+            return _signalled(command)
         if debug:
             traceback.print_exc()
         where = f"{exc.filename}: " if exc.filename else ""
@@ -133,15 +152,24 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit:
         raise
     except BaseException as exc:  # the last line of defence: a bug, said in one line
-        if _caused_by_interrupt(exc):  # e.g. numpy turns Ctrl-C during its import into an ImportError
-            _say(f"{command}: interrupted; no partial output was left behind")
-            return EXIT_INTERRUPTED
+        # A signal that a library turned into something else (numpy makes Ctrl-C during its
+        # import an ImportError without the KeyboardInterrupt in the chain).
+        if _RECEIVED or _caused_by_interrupt(exc):
+            return _signalled(command)
         if debug:
             traceback.print_exc()
         where = _input_of(args) if args is not None else None
         _say(f"{command}: error: {where + ': ' if where else ''}unexpected {type(exc).__name__}: {_one_line(exc)}"
              + ("" if debug else "; run with --debug for the details"))
         return EXIT_BUG
+
+
+def _signalled(command: str) -> int:
+    if signal.SIGTERM in _RECEIVED:
+        _say(f"{command}: terminated; no partial output was left behind")
+        return EXIT_TERMINATED
+    _say(f"{command}: interrupted; no partial output was left behind")
+    return EXIT_INTERRUPTED
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:
