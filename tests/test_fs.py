@@ -202,3 +202,19 @@ def test_a_staging_folder_left_by_a_killed_run_is_cleaned_up(tmp_path):
     with output_directory(out) as d:  # an empty folder apart from the stale staging
         (d / "r.txt").write_text("r")
     assert _names(out) == [MANIFEST, "r.txt"]
+
+
+@pytest.mark.parametrize("name", ["../victim.txt", "/etc/passwd", "a/../../victim.txt"])
+def test_a_manifest_naming_files_outside_its_folder_is_not_trusted(tmp_path, name):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    out = tmp_path / "out"
+    with output_directory(out) as d:
+        (d / "r.txt").write_text("r")
+    manifest = json.loads((out / MANIFEST).read_text())
+    manifest["files"][name] = 8
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(OptionError, match="did not write"):
+        with output_directory(out, overwrite=True) as d:
+            (d / "s.txt").write_text("s")
+    assert victim.read_text() == "precious"

@@ -34,7 +34,7 @@ import shutil
 import signal
 import tempfile
 import threading
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Iterable, Iterator
 
 from .errors import OptionError
@@ -93,6 +93,10 @@ def _read_manifest(folder: Path) -> dict[str, int] | None:
         files = data["files"]
         if data.get("format") != "nurbskit-output" or not isinstance(files, dict):
             return None
+        for name in files:  # a manifest must not name anything outside its folder
+            parts = PurePosixPath(name).parts
+            if not parts or PurePosixPath(name).is_absolute() or ".." in parts or "\\" in name or name == MANIFEST:
+                return None
         return {str(k): int(v) for k, v in files.items()}
     except (OSError, ValueError, KeyError, TypeError, RecursionError):
         return None

@@ -416,8 +416,10 @@ def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype)
     if dtype is np.uint8:
         return np.ascontiguousarray(colors_to_uint8(arr))
     if dtype is np.int64 and arr.dtype.kind == "f":
-        if not np.all(np.isfinite(arr)) or np.any(arr != np.rint(arr)):
-            raise OptionError(f"{what} must be integers")
+        if not np.all(np.isfinite(arr)) or np.any(arr != np.rint(arr)) or np.any(np.abs(arr) >= 2.0**63):
+            raise OptionError(f"{what} must be integers that int64 holds")
+    if dtype is np.int64 and arr.dtype == np.uint64 and arr.size and int(arr.max()) >= 2**63:
+        raise OptionError(f"{what} must be integers that int64 holds, found {int(arr.max())}")
     return np.ascontiguousarray(arr.astype(dtype))
 
 
