@@ -521,6 +521,7 @@ def edited(draw):
 @settings(max_examples=examples(100))
 @given(edited())
 @example(("binary.ply", _ply_binary().replace(b"uchar int vertex_indices", b"int int vertex_indices")))
+@example(("cloud.npy", _npy().replace(b"'shape': (", b"'s", 1)))  # found by make fuzz: a TokenError
 def test_random_edits(tmp_path_factory, case):
     name, data = case
     survives(tmp_path_factory.mktemp("edit") / name, data)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -28,10 +29,16 @@ def _header_shape(path: Path):
                 shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
             else:
                 shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
-        except ValueError as exc:
-            raise InputError(f"{path}: not a valid .npy file ({exc})") from None
+        except (ValueError, TypeError, SyntaxError, tokenize.TokenError, RecursionError, MemoryError) as exc:
+            # numpy parses the header with ast.literal_eval: a damaged one raises any of these
+            raise InputError(f"{path}: not a valid .npy file ({type(exc).__name__}: {_first_line(exc)})") from None
         offset = handle.tell()
     return shape, dtype, offset
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0][:200] if text else type(exc).__name__
 
 
 def _load_npy(path: Path) -> np.ndarray:
@@ -48,8 +55,8 @@ def _load_npy(path: Path) -> np.ndarray:
     check_fits(path, nbytes, "the array")
     try:
         return np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise InputError(f"{path}: cannot read .npy ({exc})") from None
+    except (ValueError, OSError, TypeError, SyntaxError, tokenize.TokenError) as exc:
+        raise InputError(f"{path}: cannot read .npy ({_first_line(exc)})") from None
 
 
 def _table(path: Path, arr: np.ndarray, what: str, cols: tuple[int, ...]) -> np.ndarray:
@@ -86,8 +93,9 @@ def read_npz(path: str | os.PathLike) -> Payload:
         check_fits(path, sum(info.file_size for info in archive.zip.infolist()), "the arrays")
         try:
             arrays = {name: archive[name] for name in names}
-        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-            raise InputError(f"{path}: a .npz array cannot be read ({type(exc).__name__}: {exc})") from None
+        except (ValueError, OSError, EOFError, KeyError, TypeError, SyntaxError, tokenize.TokenError,
+                RecursionError, zipfile.BadZipFile, zlib.error) as exc:
+            raise InputError(f"{path}: a .npz array cannot be read ({type(exc).__name__}: {_first_line(exc)})") from None
     points = np.ascontiguousarray(_table(path, arrays[key], key, (3,)), dtype=np.float64)
     n = points.shape[0]
     normals = colors = labels = faces = None
