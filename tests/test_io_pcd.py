@@ -10,6 +10,8 @@ from nurbskit.errors import InputError
 from nurbskit.io import read_points, write_points
 from nurbskit.io.lzf import LZFError, compress_literal, decompress
 
+from _extras import require_extra
+
 
 def naive_lzf_compress(data: bytes) -> bytes:
     """A slow, obviously correct LZF encoder: greedy longest match within 8 KB, 3..264 bytes,
@@ -65,7 +67,7 @@ def test_lzf_overlapping_copy_by_hand():
 
 
 def test_lzf_with_python_lzf_as_oracle():
-    lzf = pytest.importorskip("lzf")
+    lzf = require_extra("lzf", "pcd")
     data = np.repeat(np.random.default_rng(0).integers(0, 50, 3000), 7).astype(np.uint8).tobytes()
     assert decompress(lzf.compress(data), len(data), use_c=False) == data
 
@@ -145,7 +147,7 @@ def test_write_read_round_trip(tmp_path, data, coord):
 
 
 def test_written_compressed_pcd_decodes_with_python_lzf(tmp_path):
-    lzf = pytest.importorskip("lzf")
+    lzf = require_extra("lzf", "pcd")
     path = tmp_path / "c.pcd"
     write_points(path, np.arange(30.0).reshape(10, 3), data="binary_compressed")
     raw = path.read_bytes()

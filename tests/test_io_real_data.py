@@ -12,6 +12,10 @@ import trimesh
 
 from nurbskit.io import read_mesh, read_nurbs, read_points, write_mesh, write_points
 
+from _assert import assert_close
+from _extras import require_extra
+
+
 def canonical_triangles(corners: np.ndarray) -> np.ndarray:
     """Triangles ``(F, 3, 3)`` as a sorted ``(F, 9)`` table, each rotated to start at its
     smallest corner: two meshes with the same oriented triangles give the same table."""
@@ -139,7 +143,7 @@ def test_kinect_pcd_binary_compressed(shared_data, name, kept, dropped, labels):
 
 
 def test_kinect_pcd_decoder_agrees_with_python_lzf(shared_data):
-    lzf = pytest.importorskip("lzf")
+    lzf = require_extra("lzf", "pcd")
     from nurbskit.io.lzf import decompress
 
     data = (shared_data / "kinect_scans/test0.pcd").read_bytes()
@@ -161,7 +165,7 @@ def test_text_clouds(shared_data):
 
 
 def test_duck_ctrlpts_with_weights_and_knots(shared_data):
-    pytest.importorskip("geomdl")
+    require_extra("geomdl", "dev")
     from geomdl import NURBS, compatibility, exchange
 
     folder = shared_data / "thesis_nurbsdiff/ducky"
@@ -183,11 +187,11 @@ def test_duck_ctrlpts_with_weights_and_knots(shared_data):
     import torch
 
     ours = duck.evaluate(torch.tensor(raw, dtype=torch.float64)).numpy()
-    np.testing.assert_allclose(ours, np.array(g.evaluate_list(unit)), atol=1e-9)
+    assert_close(ours, np.array(g.evaluate_list(unit)), atol=1e-9)
 
 
 def test_cylinder_ctrlpts_and_roof_smesh(shared_data):
-    pytest.importorskip("geomdl")
+    require_extra("geomdl", "dev")
     from geomdl import exchange
 
     import nurbskit
@@ -198,10 +202,10 @@ def test_cylinder_ctrlpts_and_roof_smesh(shared_data):
     roof = read_nurbs(roof_path)
     ref = nurbskit.from_geomdl(exchange.import_smesh(str(roof_path))[0])
     assert roof.sizes == ref.sizes == (7, 7) and roof.is_rational
-    np.testing.assert_allclose(roof.control_points.numpy(), ref.control_points.numpy(), atol=1e-12)
+    assert_close(roof.control_points.numpy(), ref.control_points.numpy(), atol=1e-12)
     np.testing.assert_array_equal(roof.weights.numpy(), ref.weights.numpy())
     for a, b in zip(roof.knot_vectors, ref.knot_vectors):  # geomdl rescales knots to [0, 1]
-        np.testing.assert_allclose((a.numpy() - a[0].item()) / (a[-1] - a[0]).item(), b.numpy(), atol=1e-15)
+        assert_close((a.numpy() - a[0].item()) / (a[-1] - a[0]).item(), b.numpy(), atol=1e-15)
     assert roof.domain[0] == (0.0, 34.9065850398866)
 
 
@@ -250,7 +254,7 @@ def test_real_nurbs_round_trip_every_nurbs_format(shared_data, tmp_path, ext):
     from nurbskit.io import write_nurbs
 
     if ext == ".3dm":
-        pytest.importorskip("rhino3dm")
+        require_extra("rhino3dm", "cad")
     folder = shared_data / "thesis_nurbsdiff"
     knots = json.loads((folder / "ducky/duck_knots.json").read_text())["duck1_body"]
     objects = [

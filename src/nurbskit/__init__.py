@@ -11,20 +11,19 @@ import importlib
 
 __version__ = "0.1.0"
 
-from .core import (  # noqa: E402
-    NURBSCurve,
-    NURBSSurface,
-    NURBSVolume,
-    from_geomdl,
-    load,
-    save,
-    to_geomdl,
-)
 from .errors import InputError, NurbskitError, OptionError  # noqa: E402
 
-# Heavier parts load on first use, so `import nurbskit` stays light.
+# Everything that needs torch loads on first use, so `import nurbskit` (and with it the
+# command line's start-up, where Ctrl-C must stay one line) imports no torch.
 # name -> (module, attribute); attribute None means the module itself.
 _LAZY = {
+    "NURBSCurve": ("nurbskit.core", "NURBSCurve"),
+    "NURBSSurface": ("nurbskit.core", "NURBSSurface"),
+    "NURBSVolume": ("nurbskit.core", "NURBSVolume"),
+    "from_geomdl": ("nurbskit.core", "from_geomdl"),
+    "load": ("nurbskit.core", "load"),
+    "save": ("nurbskit.core", "save"),
+    "to_geomdl": ("nurbskit.core", "to_geomdl"),
     "project_points": ("nurbskit.core.project", "project_points"),
     "tessellate": ("nurbskit.core.tessellate", "tessellate"),
     "insert_knot": ("nurbskit.core.ops", "insert_knot"),
@@ -51,8 +50,6 @@ def __getattr__(name: str):
 
 
 __all__ = [
-    "NURBSCurve", "NURBSSurface", "NURBSVolume",
-    "save", "load", "to_geomdl", "from_geomdl",
     "NurbskitError", "InputError", "OptionError",
     *_LAZY,
 ]

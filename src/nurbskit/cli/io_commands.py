@@ -255,6 +255,10 @@ def run_sample(args) -> int:
     if args.n is not None and args.n < 1:
         raise OptionError(f"-n must be a positive integer, got {args.n}")
     out = Path(args.output)
+    if out.exists() and Path(args.mesh).exists() and out.resolve() == Path(args.mesh).resolve():
+        raise OptionError(f"-o {out}: is the input file; nurbskit never writes over its inputs")
+    if args.n is not None:
+        _check_sample_memory(args.n)
     if is_nurbs_file(args.mesh):
         return _sample_nurbs(args, out)
     if args.n is None:
@@ -277,6 +281,21 @@ def run_sample(args) -> int:
         bar.update(1)
     _note("sample", [x for x in left if x != "normals"] if args.no_normals else left, out)
     return 0
+
+
+def _check_sample_memory(n: int) -> None:
+    """Refuse -n before sampling when the samples cannot fit in memory (one line saying what fits).
+
+    About 20 float64 values per sample are alive at the peak (points, normals, barycentric
+    coordinates, candidate sets of the Poisson elimination).
+    """
+    from ..io._base import _human, available_memory
+
+    per_point = 20 * 8
+    avail = available_memory()
+    if n * per_point > avail:
+        raise OptionError(f"-n {n:,} needs about {_human(n * per_point)} of memory but only {_human(avail)} "
+                          f"is available; at most about {avail // per_point:,} samples fit")
 
 
 def _sample_nurbs(args, out: Path) -> int:

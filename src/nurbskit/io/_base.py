@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import sys
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,7 +61,8 @@ class PointCloud:
 
 @dataclass(eq=False)
 class Mesh:
-    """A triangle mesh read from a file.
+    """A triangle mesh: the one mesh type of the package (readers return it, writers and
+    the volume pipeline take it).
 
     Attributes:
         vertices: ``(V, 3)`` float64.
@@ -88,6 +90,16 @@ class Mesh:
     @property
     def num_faces(self) -> int:
         return int(self.faces.shape[0])
+
+    @property
+    def is_empty(self) -> bool:
+        """True for a mesh without faces (e.g. an isosurface of a field below its isovalue)."""
+        return self.num_faces == 0
+
+    @classmethod
+    def empty(cls) -> "Mesh":
+        """A mesh with no vertices and no faces."""
+        return cls(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
 
 
 @dataclass(eq=False)
@@ -321,6 +333,8 @@ def nonfinite_rows(array: np.ndarray) -> np.ndarray:
 
 def check_finite(path: Path, array: np.ndarray, what: str) -> None:
     """InputError naming the first row with a NaN or infinite value."""
+    if array.size == 0:
+        return
     bad = nonfinite_rows(array.reshape(array.shape[0], -1))
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
@@ -330,25 +344,57 @@ def check_finite(path: Path, array: np.ndarray, what: str) -> None:
         )
 
 
-def colors_to_uint8(values: np.ndarray) -> np.ndarray:
-    """Colours as uint8: integer types clipped to 0..255, floats in [0, 1] scaled by 255."""
+def integers(path: Path, values, what: str) -> np.ndarray:
+    """``values`` as int64, or an InputError when one is not a whole number int64 can hold.
+
+    Text readers parse every column as float64; a face index or a label read as NaN,
+    2.5 or 1e30 must not be cast silently (numpy turns them into garbage integers).
+    """
+    arr = np.asarray(values)
+    if arr.dtype.kind in "iub":
+        if arr.dtype == np.uint64 and arr.size and int(arr.max()) >= 2**63:
+            raise InputError(f"{path}: {what} must hold integers below 2^63, found {int(arr.max())}")
+        return arr.astype(np.int64)
+    if arr.dtype.kind != "f":
+        raise InputError(f"{path}: {what} must hold integers, found values of type {arr.dtype}")
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(arr) | (arr != np.rint(arr)) | (np.abs(arr) >= 2.0**63)
+    if bad.any():
+        raise InputError(f"{path}: {what} must hold integers, found {arr[bad].flat[0]!r}")
+    return arr.astype(np.int64)
+
+
+def colors_to_uint8(values: np.ndarray, path: Path | None = None) -> np.ndarray:
+    """Colours as uint8: integer types clipped to 0..255, floats in [0, 1] scaled by 255.
+
+    NaN or infinite colours are an InputError (naming ``path``), not a silent 0.
+    """
     values = np.asarray(values)
     if values.dtype.kind == "f":
+        if values.size and not np.isfinite(values).all():
+            where = f"{path}: " if path is not None else ""
+            raise InputError(f"{where}colours contain NaN or infinite values")
         if values.size and np.nanmax(values) <= 1.0:
             values = values * 255.0
         return np.clip(np.rint(values), 0, 255).astype(np.uint8)
     return np.clip(values, 0, 255).astype(np.uint8)
 
 
+def to_numpy(values):
+    """A torch tensor as a numpy array (detached, on the CPU); anything else unchanged.
+
+    torch is looked up among the loaded modules, not imported: a tensor can only exist
+    once torch is loaded, and the io layer stays importable without paying for torch.
+    """
+    torch = sys.modules.get("torch")
+    if torch is not None and isinstance(values, torch.Tensor):
+        return values.detach().cpu().numpy()
+    return values
+
+
 def as_points(points, what: str = "points") -> np.ndarray:
     """Validate an ``(N, 3)`` array given to a writer; returns float64 contiguous."""
-    try:
-        import torch
-
-        if isinstance(points, torch.Tensor):
-            points = points.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    points = to_numpy(points)
     arr = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise OptionError(f"{what} must have shape (N, 3), got {arr.shape}")
@@ -359,13 +405,7 @@ def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype)
     """Validate an optional per-point attribute for a writer (None passes through)."""
     if values is None:
         return None
-    try:
-        import torch
-
-        if isinstance(values, torch.Tensor):
-            values = values.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    values = to_numpy(values)
     arr = np.asarray(values)
     if cols is None:
         if arr.shape != (n,):
@@ -376,20 +416,16 @@ def as_attribute(values, n: int, what: str, cols: tuple[int, ...] | None, dtype)
     if dtype is np.uint8:
         return np.ascontiguousarray(colors_to_uint8(arr))
     if dtype is np.int64 and arr.dtype.kind == "f":
-        if not np.all(np.isfinite(arr)) or np.any(arr != np.rint(arr)):
-            raise OptionError(f"{what} must be integers")
+        if not np.all(np.isfinite(arr)) or np.any(arr != np.rint(arr)) or np.any(np.abs(arr) >= 2.0**63):
+            raise OptionError(f"{what} must be integers that int64 holds")
+    if dtype is np.int64 and arr.dtype == np.uint64 and arr.size and int(arr.max()) >= 2**63:
+        raise OptionError(f"{what} must be integers that int64 holds, found {int(arr.max())}")
     return np.ascontiguousarray(arr.astype(dtype))
 
 
 def as_faces(faces, num_vertices: int) -> np.ndarray:
     """Validate ``(F, 3)`` triangle indices for a writer."""
-    try:
-        import torch
-
-        if isinstance(faces, torch.Tensor):
-            faces = faces.detach().cpu().numpy()
-    except ImportError:  # pragma: no cover
-        pass
+    faces = to_numpy(faces)
     arr = np.asarray(faces)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise OptionError(f"faces must have shape (F, 3), got {arr.shape}")

@@ -8,9 +8,11 @@ knows them.
 
 from __future__ import annotations
 
+import importlib
 import os
 import tempfile
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from ._base import InputError, Payload, check_readable, sniff
@@ -23,8 +25,70 @@ EXTENSIONS = {
 }
 NURBS_EXTENSIONS = (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm", ".weights")
 MESH_FORMATS = ("ply", "off", "obj", "stl", "npz", "trimesh")
-POINT_WRITE = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".xyzc", ".pts", ".npy", ".npz", ".off", ".obj")
-MESH_WRITE = (".ply", ".off", ".obj", ".stl", ".npz")
+
+
+@dataclass(frozen=True)
+class Writer:
+    """One row of the writer table: where the writer lives and what it accepts.
+
+    Every writer is called as ``function(path, points, faces, normals, colors, labels,
+    **options)`` with validated arrays (or None) and returns the names of the given
+    attributes its format cannot store.
+    """
+
+    module: str                      # under nurbskit.io
+    function: str
+    options: frozenset = frozenset()  # keyword options it accepts
+    points: bool = True              # writes point clouds
+    mesh: bool = False               # writes triangle meshes
+
+    def load(self):
+        return getattr(importlib.import_module(f"nurbskit.io.{self.module}"), self.function)
+
+
+_TEXT = Writer("text", "write_text_points", frozenset({"precision"}))
+
+# The one table of writers, by extension: write_points and write_mesh look here only.
+WRITERS = {
+    ".ply": Writer("ply", "write_ply", frozenset({"binary"}), mesh=True),
+    ".pcd": Writer("pcd", "write_pcd", frozenset({"data", "coordinate_dtype"})),
+    ".off": Writer("off", "write_off", frozenset({"precision"}), mesh=True),
+    ".obj": Writer("obj", "write_obj", frozenset({"precision"}), mesh=True),
+    ".stl": Writer("stl", "write_stl", frozenset({"binary"}), points=False, mesh=True),
+    ".npy": Writer("npy", "write_npy"),
+    ".npz": Writer("npy", "write_npz", mesh=True),
+    **{ext: _TEXT for ext in (".xyz", ".txt", ".csv", ".xyzc", ".pts")},
+}
+POINT_WRITE = tuple(ext for ext, w in WRITERS.items() if w.points)
+MESH_WRITE = tuple(ext for ext, w in WRITERS.items() if w.mesh)
+
+
+def writer_for(path: Path, format: str | None, kind: str) -> tuple[str, Writer]:
+    """The extension and table row to write ``kind`` ('points' or 'mesh') to ``path``.
+
+    Raises OptionError for an extension without a writer of that kind, or a directory.
+    """
+    from ..errors import OptionError
+
+    ext = (format if format is None or format.startswith(".") else "." + format) or path.suffix
+    ext = ext.lower()
+    row = WRITERS.get(ext)
+    if row is None or not getattr(row, kind):
+        writable = ", ".join(POINT_WRITE if kind == "points" else MESH_WRITE)
+        what = "points" if kind == "points" else "a mesh"
+        raise OptionError(f"{path}: cannot write {what} as {ext or '(no extension)'!r}; writable: {writable}")
+    if path.is_dir():
+        raise OptionError(f"{path}: is a directory, expected a file name")
+    return ext, row
+
+
+def check_options(ext: str, row: Writer, options: dict) -> None:
+    """OptionError for keyword options the format's writer does not take."""
+    from ..errors import OptionError
+
+    unknown = set(options) - row.options
+    if unknown:
+        raise OptionError(f"options {sorted(unknown)} do not apply to {ext} files (allowed: {sorted(row.options) or 'none'})")
 
 
 def _trimesh_extensions() -> set[str]:

@@ -15,8 +15,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ._base import InputError, Mesh, as_attribute, as_faces, as_points, check_finite
-from .formats import MESH_WRITE, read_payload
-from .points import _check_options
+from .formats import check_options, read_payload, writer_for
 
 
 def read_mesh(path: str | os.PathLike, *, format: str | None = None) -> Mesh:
@@ -33,6 +32,8 @@ def read_mesh(path: str | os.PathLike, *, format: str | None = None) -> Mesh:
     """
     path = Path(path)
     payload = read_payload(path, format)
+    if payload.points.shape[0] == 0:
+        raise InputError(f"{path}: the file holds no points and no faces")
     if payload.faces is None or payload.faces.shape[0] == 0:
         raise InputError(
             f"{path}: has {payload.points.shape[0]:,} points and no faces; it is a point cloud (use read_points)"
@@ -42,55 +43,40 @@ def read_mesh(path: str | os.PathLike, *, format: str | None = None) -> Mesh:
                 payload.normals, payload.colors, path)
 
 
-def write_mesh(path: str | os.PathLike, vertices, faces, normals=None, colors=None, *,
+def write_mesh(path: str | os.PathLike, vertices, faces=None, normals=None, colors=None, *,
                format: str | None = None, **options) -> list[str]:
     """Write a triangle mesh by extension (.ply, .off, .obj, .stl, .npz), atomically.
 
     Args:
-        vertices: ``(V, 3)``; faces ``(F, 3)`` integer indices; normals ``(V, 3)`` and
-            colors ``(V, 3|4)`` per vertex, optional.
+        vertices: ``(V, 3)`` (or a :class:`Mesh`, with ``faces`` left out); faces ``(F, 3)``
+            integer indices; normals ``(V, 3)`` and colors ``(V, 3|4)`` per vertex, optional.
         options: ``binary`` for PLY and STL (default True), ``precision`` for text formats.
 
     Returns:
         The names of the attributes the format cannot store (STL keeps neither normals
-        nor colours; it also rounds coordinates to float32).
+        nor colours; it also rounds coordinates to float32, and refuses values beyond
+        float32's range).
 
     Example:
         >>> write_mesh("tri.obj", np.eye(3), np.array([[0, 1, 2]]))  # doctest: +SKIP
         []
     """
     path = Path(path)
-    ext = (format if format is None or format.startswith(".") else "." + format) or path.suffix
-    ext = ext.lower()
-    if ext not in MESH_WRITE:
-        raise OptionError(f"{path}: cannot write a mesh as {ext or '(no extension)'!r}; writable: {', '.join(MESH_WRITE)}")
-    if path.is_dir():
-        raise OptionError(f"{path}: is a directory, expected a file name")
+    if isinstance(vertices, Mesh):
+        if faces is not None:
+            raise OptionError("write_mesh: give a Mesh, or vertices and faces, not both")
+        mesh = vertices
+        vertices, faces = mesh.vertices, mesh.faces
+        normals = mesh.normals if normals is None else normals
+        colors = mesh.colors if colors is None else colors
+    if faces is None:
+        raise OptionError("write_mesh needs faces (F, 3); write a point cloud with write_points")
+    ext, row = writer_for(path, format, "mesh")
     v = as_points(vertices, "vertices")
     f = as_faces(faces, v.shape[0])
     nrm = as_attribute(normals, v.shape[0], "normals", (3,), np.float64)
     col = as_attribute(colors, v.shape[0], "colors", (3, 4), np.uint8)
     if not np.isfinite(v).all():
         raise OptionError(f"{path}: vertices contain NaN or infinite values; refusing to write them")
-    _check_options(ext, options)
-    if ext == ".ply":
-        from .ply import write_ply
-
-        write_ply(path, v, f, nrm, col, None, binary=options.get("binary", True))
-        return []
-    if ext == ".off":
-        from .off import write_off
-
-        return write_off(path, v, f, nrm, col, **options)
-    if ext == ".obj":
-        from .obj import write_obj
-
-        return write_obj(path, v, f, nrm, col, **options)
-    if ext == ".npz":
-        from .npy import write_npz
-
-        return write_npz(path, v, f, nrm, col, None)
-    from .stl import write_stl
-
-    write_stl(path, v, f, binary=options.get("binary", True))
-    return [n for n, val in (("normals", nrm), ("colors", col)) if val is not None]
+    check_options(ext, row, options)
+    return row.load()(path, v, f, nrm, col, None, **options)

@@ -134,6 +134,9 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
         raise
     except NurbskitError as exc:  # construction found the parameters inconsistent
         raise InputError(f"{path}: {exc}") from None
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
+        # a field of the wrong kind (a list where a name belongs, text where a size belongs)
+        raise InputError(f"{path}: malformed {fmt} data ({type(exc).__name__}: {exc})") from None
     return obj.to(dtype)
 
 
@@ -143,11 +146,9 @@ def _no_options(path, options):
 
 
 def _load_json(path: Path):
-    try:
-        return json.loads(read_bytes(path))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        where = f" at line {exc.lineno}" if isinstance(exc, json.JSONDecodeError) else ""
-        raise InputError(f"{path}: not valid JSON{where} ({getattr(exc, 'msg', exc)})") from None
+    from ._json import load_json
+
+    return load_json(path)
 
 
 def _read_json(path: Path, fmt: str, index: int) -> TensorSpline:
@@ -169,7 +170,7 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
     items = shape.get("data")
     if isinstance(items, dict):  # a single object, as in NURBS-Diff's AMSurface.json
         items = [items]
-    if kind not in _CLASSES or not isinstance(items, list) or not items:
+    if not isinstance(kind, str) or kind not in _CLASSES or not isinstance(items, list) or not items:
         raise InputError(f"{path}: geomdl JSON needs shape.type curve/surface/volume and shape.data, got type {kind!r}")
     if not -len(items) <= index < len(items):
         raise OptionError(f"{path}: index {index} is out of range; the file holds {len(items)} {kind}(s)")
@@ -189,6 +190,9 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
         raise InputError(f"{path}: geomdl JSON {kind} lacks the field {exc.args[0]!r}") from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"{path}: geomdl JSON has a malformed field ({exc})") from None
+    if points.ndim < 2 or points.shape[-1] < 1 or min(sizes) < 1 or min(degrees) < 1:
+        raise InputError(f"{path}: geomdl JSON needs points (N, dim), sizes and degrees >= 1; found points "
+                         f"of shape {points.shape}, sizes {sizes}, degrees {degrees}")
     dim = points.shape[-1]
     count = int(np.prod(sizes))
     if points.size != count * dim:
@@ -302,6 +306,8 @@ def _resolve(path: Path, options: dict, count: int, default_kind: str | None = N
             f"({path.name}.json)"
         )
     sizes = [int(s) for s in sizes]
+    if min(sizes, default=0) < 1:
+        raise OptionError(f"{path}: sizes must be positive, got {sizes}")
     kind = merged.get("kind") or _KIND_BY_DIM.get(len(sizes))
     if kind not in _CLASSES or {"curve": 1, "surface": 2, "volume": 3}[kind] != len(sizes):
         raise OptionError(f"{path}: sizes {sizes} do not describe a {kind}")

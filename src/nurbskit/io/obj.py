@@ -62,7 +62,7 @@ def read_obj(path: str | os.PathLike) -> Payload:
         raise InputError(f"{path}: 'v' lines need 3 (x y z), 4 (x y z w) or 6 (x y z r g b) numbers, found {table.shape[1]}")
     nv = table.shape[0]
     points = np.ascontiguousarray(table[:, :3])
-    colors = colors_to_uint8(table[:, 3:6]) if table.shape[1] in (6, 7) else None
+    colors = colors_to_uint8(table[:, 3:6], path) if table.shape[1] in (6, 7) else None
     vn = _numbers(path, vn_lines, "normal ('vn') lines") if vn_lines else None
     if vn is not None and vn.shape[1] != 3:
         raise InputError(f"{path}: 'vn' lines need 3 numbers, found {vn.shape[1]}")
@@ -77,6 +77,9 @@ def _ints(path, block: bytes, what: str) -> np.ndarray:
     tokens = block.split()
     try:
         return np.array(tokens, dtype=np.int64) if tokens else np.zeros(0, np.int64)
+    except OverflowError:
+        bad = next(t for t in tokens if t.lstrip(b"-").isdigit() and abs(int(t)) >= 2**63)
+        raise InputError(f"{path}: a face ('f') line has a {what} beyond any file's size: {bad[:30]!r}") from None
     except ValueError:
         bad = next(t for t in tokens if not t.lstrip(b"-").isdigit())
         raise InputError(f"{path}: a face ('f') line has a {what} that is not an integer: {bad[:30]!r}") from None
@@ -111,7 +114,7 @@ def _faces(path, data, f_lines, nv, vn):
     if has_refs and vn is not None:
         n_tok = re.findall(rb"(?:^|[ \n])-?\d+/-?\d*/(-?\d+)", block)
         if len(n_tok) == v_idx.size:
-            n_idx = np.array(n_tok, dtype=np.int64)
+            n_idx = _ints(path, b" ".join(n_tok), "normal reference")
             n_idx = np.where(n_idx < 0, vn.shape[0] + n_idx, n_idx - 1)
             if n_idx.min() >= 0 and n_idx.max() < vn.shape[0] and v_idx.min() >= 0 and v_idx.max() < nv:
                 seen = np.zeros(nv, bool)
@@ -122,7 +125,7 @@ def _faces(path, data, f_lines, nv, vn):
     return tri, normals
 
 
-def write_obj(path, points, faces=None, normals=None, colors=None, *, precision: int = 17) -> list[str]:
+def write_obj(path, points, faces=None, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
     """Write OBJ (``v``, ``vn`` one per vertex, ``f a//a b//b c//c`` when normals exist), atomically."""
     cols, kinds = [points[:, 0], points[:, 1], points[:, 2]], "fff"
     if colors is not None:
@@ -141,7 +144,8 @@ def write_obj(path, points, faces=None, normals=None, colors=None, *, precision:
             else:
                 rows = format_rows([f[:, 0], f[:, 1], f[:, 2]], "ddd")
             handle.write(_prefixed(b"f ", rows))
-    return ["alpha"] if colors is not None and colors.shape[1] == 4 else []
+    left = ["alpha"] if colors is not None and colors.shape[1] == 4 else []
+    return left + (["labels"] if labels is not None else [])
 
 
 def _prefixed(prefix: bytes, rows: bytes) -> bytes:

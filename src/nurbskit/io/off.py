@@ -19,7 +19,7 @@ import numpy as np
 from .._fs import atomic_open
 from ._base import (
     InputError, Lines, Payload, check_declared, check_faces, clean_text, colors_to_uint8,
-    fan_triangulate, parse_table, read_bytes,
+    fan_triangulate, integers, parse_table, read_bytes,
 )
 from .text import format_rows
 
@@ -84,7 +84,7 @@ def read_off(path: str | os.PathLike) -> Payload:
         if k not in (3, 4):
             raise InputError(f"{path}: COFF vertex lines need 3 or 4 colour values after the coordinates")
         # Geomview allows integers 0..255 or floats 0..1; colors_to_uint8 tells them apart by range
-        colors = colors_to_uint8(table[:, col: col + k])
+        colors = colors_to_uint8(table[:, col: col + k], path)
     faces = _read_faces(path, lines, row + nv, nf)
     extra = lines.count - row - nv - nf
     if extra > 0:
@@ -104,33 +104,32 @@ def _read_faces(path: Path, lines: Lines, row: int, nf: int) -> np.ndarray:
     except InputError:
         table = None  # ragged: polygons of several sizes, or colours on some faces
     if table is not None:
-        k = table[:, 0]
+        k = integers(path, table[:, 0], "face sizes (the first number of a face line)")
         size = int(k[0])
         if np.all(k == size) and table.shape[1] >= size + 1 and size >= 1:
-            idx = table[:, 1: size + 1]
-            if np.any(idx != np.rint(idx)):
-                raise InputError(f"{path}: face lines hold non-integer vertex indices")
-            idx = idx.astype(np.int64)
+            idx = integers(path, table[:, 1: size + 1], "vertex indices of the faces")
             return idx if size == 3 else fan_triangulate(np.full(nf, size), idx.ravel())
     counts, flat = [], []
     for i, raw in enumerate(block.split(b"\n")[:nf]):
         words = raw.split()
         try:
             k = int(words[0])
-            idx = [int(w) for w in words[1: k + 1]]
+            idx = [int(w) for w in words[1: k + 1]] if k >= 0 else []
         except (IndexError, ValueError):
             raise InputError(f"{path}: face line {row + i + 1} is not 'k i_1 .. i_k': {raw[:60]!r}") from None
         if len(idx) != k:
             raise InputError(f"{path}: face line {row + i + 1} declares {k} corners but has {len(idx)}")
+        if idx and (min(idx) < -(2**63) or max(idx) >= 2**63):
+            raise InputError(f"{path}: face line {row + i + 1} refers to a vertex beyond any file's size")
         counts.append(k)
         flat.extend(idx)
-    return fan_triangulate(np.array(counts), np.array(flat, dtype=np.int64))
+    return fan_triangulate(np.array(counts, dtype=np.int64), np.array(flat, dtype=np.int64))
 
 
-def write_off(path, points, faces=None, normals=None, colors=None, *, precision: int = 17) -> list[str]:
+def write_off(path, points, faces=None, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
     """Write OFF (NOFF when normals are given, COFF/CNOFF with colours), atomically.
 
-    Returns the attributes the format could not store (none: labels are not part of OFF).
+    Returns the attributes the format could not store (labels are not part of OFF).
     """
     keyword = ("C" if colors is not None else "") + ("N" if normals is not None else "") + "OFF"
     nf = 0 if faces is None else faces.shape[0]
@@ -146,4 +145,4 @@ def write_off(path, points, faces=None, normals=None, colors=None, *, precision:
         handle.write(format_rows(cols, kinds, precision))
         if nf:
             handle.write(format_rows([np.full(nf, 3), faces[:, 0], faces[:, 1], faces[:, 2]], "dddd"))
-    return []
+    return ["labels"] if labels is not None else []

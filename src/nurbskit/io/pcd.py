@@ -21,14 +21,17 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import (
-    InputError, Lines, Payload, check_declared, check_fits, clean_text, columns_to_float64, parse_table, read_bytes,
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, columns_to_float64, integers, parse_table,
+    read_bytes,
 )
 from .lzf import LZFError, compress_literal, decompress
 from .text import format_rows
 
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 _KIND = {"F": "f", "I": "i", "U": "u"}
+_MAX_COUNT = 1 << 16  # values per field and point (PCL's largest descriptors have a few hundred)
 
 
 def _parse_header(path: Path, data: bytes):
@@ -71,14 +74,16 @@ def _parse_header(path: Path, data: bytes):
         counts_i = [int(c) for c in counts]
     except (ValueError, IndexError):
         raise InputError(f"{path}: PCD header has a WIDTH, HEIGHT, POINTS, SIZE or COUNT that is not an integer") from None
+    if min(width, height, points) < 0:
+        raise InputError(f"{path}: PCD header has a negative WIDTH, HEIGHT or POINTS ({width}, {height}, {points})")
     if points != width * height:
         raise InputError(f"{path}: PCD header says POINTS {points:,} but WIDTH x HEIGHT = {width} x {height} = {width * height:,}")
     dtypes = []
     for name, size, kind, count in zip(fields, sizes_i, types, counts_i):
         if kind.upper() not in _KIND or size not in (1, 2, 4, 8) or (kind.upper() == "F" and size not in (4, 8)):
             raise InputError(f"{path}: PCD field {name!r} has unsupported TYPE {kind} SIZE {size}")
-        if count < 1:
-            raise InputError(f"{path}: PCD field {name!r} has COUNT {count}")
+        if not 1 <= count <= _MAX_COUNT:
+            raise InputError(f"{path}: PCD field {name!r} has COUNT {count}; expected 1 to {_MAX_COUNT:,}")
         dtypes.append((name, np.dtype(f"<{_KIND[kind.upper()]}{size}"), count))
     mode = header["DATA"][0].lower() if header["DATA"] else ""
     if mode not in ("ascii", "binary", "binary_compressed"):
@@ -145,7 +150,7 @@ def read_pcd(path: str | os.PathLike) -> Payload:
         if lines.count != n:
             raise InputError(f"{path}: PCD header declares {n:,} points but {lines.count:,} data lines follow")
         width_cols = sum(count for _, _, count in dtypes)
-        table = parse_table(path, body, n, "point lines")
+        table = parse_table(path, body, n, "point lines") if n else np.zeros((0, width_cols))
         if n and table.shape[1] != width_cols:
             raise InputError(f"{path}: PCD point lines have {table.shape[1]} values, the FIELDS need {width_cols}")
         col = 0
@@ -154,8 +159,16 @@ def read_pcd(path: str | os.PathLike) -> Payload:
             if name in ("rgb", "rgba"):
                 # ASCII PCD writes packed colours as a float (rgb) or an integer (rgba)
                 vals = vals.astype(np.float32).view(np.uint32) if dt.kind == "f" else vals.astype(np.uint32)
-            else:  # the declared type: a float32 field printed in decimal reads back as that float32
+            elif dt.kind in "iu":  # the declared integer type, checked: NaN or 1e30 must not wrap around
+                vals = integers(path, vals, f"the '{name}' values")
+                info = np.iinfo(dt)
+                if vals.size and (vals.min() < info.min or vals.max() > info.max):
+                    raise InputError(f"{path}: a '{name}' value does not fit the declared TYPE {dt.kind.upper()} "
+                                     f"SIZE {dt.itemsize} ({info.min} to {info.max})")
                 vals = vals.astype(dt)
+            else:  # the declared type: a float32 field printed in decimal reads back as that float32
+                with np.errstate(over="ignore"):
+                    vals = vals.astype(dt)
             columns[name] = vals[:, 0] if count == 1 else vals
             col += count
     for axis in "xyz":
@@ -183,25 +196,37 @@ def read_pcd(path: str | os.PathLike) -> Payload:
                          "fields": [d[0] for d in dtypes]})
 
 
-def write_pcd(path, points, normals=None, colors=None, labels=None, *, data: str = "binary",
-              coordinate_dtype=np.float32) -> list[str]:
+def write_pcd(path, points, faces=None, normals=None, colors=None, labels=None, *, data: str = "binary",
+              coordinate_dtype=None) -> list[str]:
     """Write PCD v0.7 (``data``: 'ascii', 'binary' or 'binary_compressed'), atomically.
 
-    Coordinates are stored as float32 (PCL's usual type; ``coordinate_dtype=np.float64``
-    keeps them exact), colours as a packed ``rgb`` float (``rgba`` uint32 with alpha),
-    labels as ``label`` int32/uint32. The cloud is unorganised (HEIGHT 1).
+    Coordinates are stored as float32 (PCL's usual type) when every coordinate and normal
+    fits float32's range, as float64 (``F 8``) otherwise, never as ``inf``;
+    ``coordinate_dtype=np.float64`` keeps them exact, ``np.float32`` insists on float32
+    (and refuses values beyond its range). Colours go into a packed ``rgb`` float
+    (``rgba`` uint32 with alpha), labels into ``label`` (I or U, 4 bytes, 8 when needed).
+    The cloud is unorganised (HEIGHT 1).
     """
     if data not in ("ascii", "binary", "binary_compressed"):
-        raise InputError(f"PCD data mode must be ascii, binary or binary_compressed, got {data!r}")
+        raise OptionError(f"PCD data mode must be ascii, binary or binary_compressed, got {data!r}")
     n = points.shape[0]
+    big = max(_largest(points), _largest(normals))
+    f32 = float(np.finfo(np.float32).max)
+    if coordinate_dtype is None:
+        coordinate_dtype = np.float32 if big <= f32 else np.float64
     cdt = np.dtype(coordinate_dtype).newbyteorder("<")
+    if cdt.kind != "f" or cdt.itemsize not in (4, 8):
+        raise OptionError(f"PCD coordinate_dtype must be float32 or float64, got {np.dtype(coordinate_dtype)}")
+    if cdt.itemsize == 4 and big > f32:
+        raise OptionError(f"{path}: a coordinate ({big:.3g}) is beyond float32's range; write it with "
+                          "coordinate_dtype=float64 (PCD 'F 8')")
     fields = [("x", cdt), ("y", cdt), ("z", cdt)]
     if normals is not None:
         fields += [("normal_x", cdt), ("normal_y", cdt), ("normal_z", cdt)]
     if colors is not None:
         fields += [("rgba", np.dtype("<u4"))] if colors.shape[1] == 4 else [("rgb", np.dtype("<f4"))]
     if labels is not None:
-        fields += [("label", np.dtype("<i4") if labels.size and labels.min() < 0 else np.dtype("<u4"))]
+        fields += [("label", _label_dtype(labels))]
     rec = np.empty(n, np.dtype(fields))
     for i, a in enumerate("xyz"):
         rec[a] = points[:, i]
@@ -247,4 +272,16 @@ def write_pcd(path, points, normals=None, colors=None, labels=None, *, data: str
                     cols.append(rec[name].astype(np.int64))
                     kinds += "d"
             handle.write(format_rows(cols, kinds, 9 if cdt.itemsize == 4 else 17))
-    return []
+    return ["faces"] if faces is not None else []
+
+
+def _largest(values) -> float:
+    return float(np.abs(values).max()) if values is not None and values.size else 0.0
+
+
+def _label_dtype(labels: np.ndarray) -> np.dtype:
+    """The narrowest PCD integer type (4 or 8 bytes, signed when needed) that holds every label."""
+    lo, hi = (int(labels.min()), int(labels.max())) if labels.size else (0, 0)
+    if lo < 0:
+        return np.dtype("<i4") if lo >= -(2**31) and hi < 2**31 else np.dtype("<i8")
+    return np.dtype("<u4") if hi < 2**32 else np.dtype("<u8")

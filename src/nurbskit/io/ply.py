@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import (
     InputError, Lines, Payload, check_declared, check_faces, check_fits, clean_text,
-    colors_to_uint8, columns_to_float64, fan_triangulate, parse_table, read_bytes,
+    colors_to_uint8, columns_to_float64, fan_triangulate, integers, parse_table, read_bytes,
 )
 
 _TYPES = {
@@ -86,11 +87,16 @@ def _parse_header(path: Path, data: bytes) -> tuple[str, list[_Element], int]:
             if len(words) == 5 and words[1] == "list":
                 if words[2] not in _TYPES or words[3] not in _TYPES:
                     raise InputError(f"{where}: unknown list types {words[2]!r}, {words[3]!r}")
-                elements[-1].props.append((words[4], "list", _TYPES[words[2]], _TYPES[words[3]]))
+                if _TYPES[words[2]][0] == "f":
+                    raise InputError(f"{where}: a list's count type must be an integer type, not {words[2]}")
+                prop = (words[4], "list", _TYPES[words[2]], _TYPES[words[3]])
             elif len(words) == 3 and words[1] in _TYPES:
-                elements[-1].props.append((words[2], _TYPES[words[1]]))
+                prop = (words[2], _TYPES[words[1]])
             else:
                 raise InputError(f"{where}: expected 'property TYPE NAME' or 'property list CTYPE ITYPE NAME'")
+            if any(p[0] == prop[0] for p in elements[-1].props):
+                raise InputError(f"{where}: property {prop[0]!r} is declared twice in element {elements[-1].name!r}")
+            elements[-1].props.append(prop)
         else:
             raise InputError(f"{where}: unknown header keyword {words[0]!r}")
     if fmt is None:
@@ -121,14 +127,17 @@ def _read_binary_element(path, data, pos, el: _Element, order: str):
             if off + ctype.itemsize > len(data):
                 raise InputError(f"{path}: binary PLY is truncated inside the first '{el.name}' record")
             n = int(np.frombuffer(data, ctype, 1, off)[0])
+            if n < 0 or off + ctype.itemsize + n * itype.itemsize > len(data):
+                fixed_ok = False  # a bad count: the record walk below says where
+                break
             fields.append(("__count_" + prop[0], ctype))
             fields.append((prop[0], itype, (n,)) if n else (prop[0], itype, (0,)))
             off += ctype.itemsize + n * itype.itemsize
-    dtype = np.dtype(fields)
     # A lower bound for the whole element: every list has at least its count field.
     min_item = sum(np.dtype(order + (p[1] if len(p) == 2 else p[2])).itemsize for p in el.props)
     check_declared(path, el.count, min_item, remaining, f"'{el.name}' records")
-    if el.count * dtype.itemsize <= remaining:
+    dtype = np.dtype(fields) if fixed_ok else None
+    if fixed_ok and el.count * dtype.itemsize <= remaining:
         arr = np.frombuffer(data, dtype=dtype, count=el.count, offset=pos)
         for prop in el.props:
             if len(prop) == 4 and not np.all(arr["__count_" + prop[0]] == arr.dtype[prop[0]].shape[0]):
@@ -160,6 +169,8 @@ def _walk_records(path, data, pos, el: _Element, order: str):
                     pos += itype.size
                 else:
                     n = int(np.frombuffer(data, ctype, 1, pos)[0])
+                    if n < 0:
+                        raise InputError(f"{path}: a '{el.name}' record has a list of {n} items")
                     pos += ctype.itemsize
                     end = pos + n * itype.itemsize
                     if end > n_data:
@@ -229,12 +240,12 @@ def _ascii_lists(path, block: bytes, el: _Element, row0: int):
                 if col >= table.shape[1]:
                     uniform = False
                     break
-                n = table[:, col]
+                n = integers(path, table[:, col], f"the list sizes of '{el.name}' records")
                 k = int(n[0])
-                if not np.all(n == k) or col + 1 + k > table.shape[1]:
+                if k < 0 or not np.all(n == k) or col + 1 + k > table.shape[1]:
                     uniform = False
                     break
-                out[prop[0]] = table[:, col + 1: col + 1 + k].astype(np.int64)
+                out[prop[0]] = integers(path, table[:, col + 1: col + 1 + k], f"the '{prop[0]}' lists")
                 col += 1 + k
         if uniform and col != table.shape[1]:
             uniform = False
@@ -251,9 +262,12 @@ def _ascii_lists(path, block: bytes, el: _Element, row0: int):
                     j += 1
                 else:
                     n = int(words[j])
-                    out[prop[0]].append(np.array(words[j + 1: j + 1 + n], dtype=np.float64).astype(np.int64))
-                    if len(out[prop[0]][-1]) != n:
+                    if n < 0:
                         raise IndexError
+                    items = np.array(words[j + 1: j + 1 + n], dtype=np.float64)
+                    if len(items) != n:
+                        raise IndexError
+                    out[prop[0]].append(integers(path, items, f"the '{prop[0]}' lists"))
                     j += 1 + n
         except (IndexError, ValueError):
             raise InputError(
@@ -311,12 +325,14 @@ def _faces_from(path, fields: dict, strips: bool) -> np.ndarray:
     value = fields[name]
     if strips:
         rows = value if isinstance(value, list) else list(value)
-        return strips_to_triangles(rows)
+        return strips_to_triangles([integers(path, r, "triangle strip indices") for r in rows])
     if isinstance(value, list):
         counts = np.array([len(v) for v in value], dtype=np.int64)
-        flat = np.concatenate(value).astype(np.int64) if value else np.zeros(0, np.int64)
+        flat = integers(path, np.concatenate(value), "face indices") if value else np.zeros(0, np.int64)
         return fan_triangulate(counts, flat)
-    value = np.asarray(value).astype(np.int64)
+    value = integers(path, value, "face indices")
+    if value.ndim != 2:
+        raise InputError(f"{path}: the face element's '{name}' must be a list property")
     if value.shape[1] == 3:
         return np.ascontiguousarray(value)
     return fan_triangulate(np.full(value.shape[0], value.shape[1]), value.ravel())
@@ -355,6 +371,11 @@ def read_ply(path: str | os.PathLike) -> Payload:
     vertex = by_name.get("vertex")
     if vertex is None:
         raise InputError(f"{path}: PLY file has no 'vertex' element")
+    declared = next(el for el in elements if el.name == "vertex")
+    scalar_names = {"x", "y", "z", *LABEL_NAMES, *(n for g in NORMAL_NAMES + COLOR_NAMES for n in g)}
+    for prop in declared.props:
+        if len(prop) == 4 and prop[0] in scalar_names:
+            raise InputError(f"{path}: the vertex property {prop[0]!r} is declared as a list; expected a scalar")
     for axis in "xyz":
         if axis not in vertex:
             raise InputError(f"{path}: PLY vertex element has no '{axis}' property")
@@ -367,10 +388,10 @@ def read_ply(path: str | os.PathLike) -> Payload:
         normals = columns_to_float64(vertex[n] for n in names[:3])
     names = _pick(vertex, COLOR_NAMES)
     if names:
-        colors = colors_to_uint8(np.stack([np.asarray(vertex[n]) for n in names], axis=1))
+        colors = colors_to_uint8(np.stack([np.asarray(vertex[n]) for n in names], axis=1), path)
     label = next((n for n in LABEL_NAMES if n in vertex), None)
     if label:
-        labels = np.asarray(vertex[label]).astype(np.int64)
+        labels = integers(path, vertex[label], f"the '{label}' values")
     faces = [ _faces_from(path, by_name[n], strips=False) for n in ("face",) if n in by_name ]
     strips = [ _faces_from(path, by_name[n], strips=True) for n in ("tristrips", "tristrip") if n in by_name ]
     all_faces = faces + strips
@@ -383,13 +404,19 @@ def read_ply(path: str | os.PathLike) -> Payload:
 
 # ---- writing ------------------------------------------------------------------------
 
-def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, *, binary: bool = True) -> None:
+def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, *, binary: bool = True) -> list[str]:
     """Write a PLY file (binary little endian by default, ``binary=False`` for ASCII), atomically.
 
     ``points (N, 3)`` as double, ``normals (N, 3)`` as nx ny nz (double), ``colors (N, 3|4)`` as
     uchar red green blue [alpha], ``labels (N,)`` as int label, ``faces (F, 3)`` as a uchar/int list.
+    PLY's widest integer is 32 bits: labels or vertex indices beyond it are refused, not wrapped.
     """
     n = points.shape[0]
+    if labels is not None and labels.size and (labels.min() < -(2**31) or labels.max() >= 2**31):
+        bad = int(labels.min()) if labels.min() < -(2**31) else int(labels.max())
+        raise OptionError(f"{path}: label {bad} does not fit PLY's 32-bit int; PLY has no wider integer type")
+    if faces is not None and n > 2**31 - 1:
+        raise OptionError(f"{path}: {n:,} vertices cannot be indexed by PLY's 32-bit int faces")
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f8"), ("ny", "<f8"), ("nz", "<f8")]
@@ -414,8 +441,6 @@ def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, 
         for i, c in enumerate(("red", "green", "blue", "alpha")[: colors.shape[1]]):
             rec[c] = colors[:, i]
     if labels is not None:
-        if labels.size and (labels.min() < -(2**31) or labels.max() >= 2**31):
-            raise InputError("labels do not fit a 32-bit PLY int")
         rec["label"] = labels
     with atomic_open(path, "wb") as handle:
         handle.write(head)
@@ -434,3 +459,4 @@ def write_ply(path, points, faces=None, normals=None, colors=None, labels=None, 
             handle.write(format_rows(cols, kinds))
             if faces is not None:
                 handle.write(format_rows([np.full(nf, 3), faces[:, 0], faces[:, 1], faces[:, 2]], "dddd"))
+    return []

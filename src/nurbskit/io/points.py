@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
-from ._base import PointCloud, as_attribute, as_points, check_finite, nonfinite_rows
-from .formats import POINT_WRITE, read_payload
+from ._base import InputError, PointCloud, as_attribute, as_points, check_finite, nonfinite_rows
+from .formats import check_options, read_payload, writer_for
 
 NONFINITE = ("drop", "error", "keep")
 
@@ -51,6 +51,8 @@ def cloud_from_payload(path: Path, payload, nonfinite: str | None = None) -> Poi
         nonfinite = "drop" if payload.info.get("format", "").startswith("pcd") else "error"
     points, normals, colors, labels = payload.points, payload.normals, payload.colors, payload.labels
     dropped = payload.dropped
+    if points.shape[0] == 0:
+        raise InputError(f"{path}: the file holds no points ({payload.info.get('format', 'its header')} declares none)")
     if nonfinite == "error":
         check_finite(path, points, "points")
     elif nonfinite == "drop":
@@ -61,6 +63,8 @@ def cloud_from_payload(path: Path, payload, nonfinite: str | None = None) -> Poi
             normals = None if normals is None else normals[keep]
             colors = None if colors is None else colors[keep]
             labels = None if labels is None else labels[keep]
+        if points.shape[0] == 0:
+            raise InputError(f"{path}: the file holds no points: all {dropped:,} have NaN coordinates")
     return PointCloud(np.ascontiguousarray(points, dtype=np.float64), normals, colors, labels, dropped, path)
 
 
@@ -78,18 +82,15 @@ def write_points(path: str | os.PathLike, points, normals=None, colors=None, lab
 
     Returns:
         The names of the attributes the format cannot store (e.g. ``['labels']`` for OFF).
+        A value the format cannot hold is never altered: it is written in a wider type the
+        format allows (PCD ``F 8``, ``I 8``) or refused with an OptionError.
 
     Example:
         >>> write_points("cloud.ply", np.random.rand(100, 3))  # doctest: +SKIP
         []
     """
     path = Path(path)
-    ext = (format if format is None or format.startswith(".") else "." + format) or path.suffix
-    ext = ext.lower()
-    if ext not in POINT_WRITE:
-        raise OptionError(f"{path}: cannot write points as {ext or '(no extension)'!r}; writable: {', '.join(POINT_WRITE)}")
-    if path.is_dir():
-        raise OptionError(f"{path}: is a directory, expected a file name")
+    ext, row = writer_for(path, format, "points")
     pts = as_points(points)
     n = pts.shape[0]
     nrm = as_attribute(normals, n, "normals", (3,), np.float64)
@@ -97,45 +98,5 @@ def write_points(path: str | os.PathLike, points, normals=None, colors=None, lab
     lab = as_attribute(labels, n, "labels", None, np.int64)
     if not np.isfinite(pts).all():
         raise OptionError(f"{path}: points contain NaN or infinite values; refusing to write them")
-    _check_options(ext, options)
-    if ext == ".ply":
-        from .ply import write_ply
-
-        write_ply(path, pts, None, nrm, col, lab, binary=options.get("binary", True))
-        return []
-    if ext == ".pcd":
-        from .pcd import write_pcd
-
-        return write_pcd(path, pts, nrm, col, lab, **options)
-    if ext in (".npy",):
-        from .npy import write_npy
-
-        return write_npy(path, pts, nrm, col, lab)
-    if ext == ".npz":
-        from .npy import write_npz
-
-        return write_npz(path, pts, None, nrm, col, lab)
-    if ext == ".off":
-        from .off import write_off
-
-        write_off(path, pts, None, nrm, col, **options)
-        return ["labels"] if lab is not None else []
-    if ext == ".obj":
-        from .obj import write_obj
-
-        left = write_obj(path, pts, None, nrm, col, **options)
-        return left + (["labels"] if lab is not None else [])
-    from .text import write_text_points
-
-    return write_text_points(path, pts, nrm, col, lab, **options)
-
-
-_OPTIONS = {".ply": {"binary"}, ".pcd": {"data", "coordinate_dtype"}, ".off": {"precision"}, ".obj": {"precision"},
-            ".stl": {"binary"}}
-
-
-def _check_options(ext: str, options: dict) -> None:
-    allowed = _OPTIONS.get(ext, {"precision"} if ext not in (".npy", ".npz") else set())
-    unknown = set(options) - allowed
-    if unknown:
-        raise OptionError(f"options {sorted(unknown)} do not apply to {ext} files (allowed: {sorted(allowed) or 'none'})")
+    check_options(ext, row, options)
+    return row.load()(path, pts, None, nrm, col, lab, **options)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import InputError, Payload, check_declared, parse_table, read_bytes
 from .text import format_rows
 
@@ -79,11 +80,17 @@ def _read_ascii(path: Path, data: bytes) -> Payload:
     return Payload(vertices, faces, info={"format": "stl ascii", "triangles": nfacet})
 
 
-def write_stl(path, vertices, faces, *, binary: bool = True) -> list[str]:
+def write_stl(path, vertices, faces, normals=None, colors=None, labels=None, *, binary: bool = True) -> list[str]:
     """Write STL (binary by default), with facet normals from the corner order, atomically.
 
-    STL stores float32: coordinates come back to float32 precision.
+    STL stores float32: coordinates come back to float32 precision, and a coordinate
+    beyond float32's range is refused (it would become ``inf``). Per-vertex normals,
+    colours and labels are not part of STL: their names are returned.
     """
+    big = float(np.abs(vertices).max()) if vertices.size else 0.0
+    if big > float(np.finfo(np.float32).max):
+        raise OptionError(f"{path}: a coordinate ({big:.3g}) is beyond float32's range, the only type STL has; "
+                          "write .ply or .obj instead")
     tri = vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
@@ -111,4 +118,4 @@ def write_stl(path, vertices, faces, *, binary: bool = True) -> list[str]:
                            b"  vertex %s %s %s\n endloop\nendfacet\n" % tuple(v))
             handle.write(b"".join(out))
             handle.write(b"endsolid nurbskit\n")
-    return []
+    return [n for n, v in (("normals", normals), ("colors", colors), ("labels", labels)) if v is not None]

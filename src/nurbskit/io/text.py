@@ -24,8 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from .._fs import atomic_open
+from ..errors import OptionError
 from ._base import (
-    InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, parse_table, read_bytes,
+    InputError, Lines, Payload, check_declared, check_fits, clean_text, colors_to_uint8, integers, parse_table,
+    read_bytes,
 )
 
 TEXT_EXTENSIONS = (".xyz", ".txt", ".csv", ".xyzc", ".pts", ".xyzn", ".asc")
@@ -138,17 +140,14 @@ def read_text_points(path: str | os.PathLike) -> Payload:
     if "normals" in layout:
         normals = np.ascontiguousarray(table[:, 3:6])
     if "label" in layout:
-        col = table[:, -1]
-        if not np.all(np.isfinite(col)) or np.any(col != np.rint(col)):
-            bad = int(np.flatnonzero(~np.isfinite(col) | (col != np.rint(col)))[0])
-            raise InputError(f"{path}: the label column must hold integers; line {bad + 1} has {col[bad]!r}")
-        labels = col.astype(np.int64)
+        labels = integers(path, table[:, -1], "the label column")
     if "rgb" in layout:
-        colors = colors_to_uint8(table[:, -3:].astype(np.int64))
+        colors = colors_to_uint8(integers(path, table[:, -3:], "the colour columns"))
     return Payload(points, None, normals, colors, labels, info={"format": f"text ({layout})"})
 
 
-def write_text_points(path, points, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:
+def write_text_points(path, points, faces=None, normals=None, colors=None, labels=None, *,
+                      precision: int = 17) -> list[str]:
     """Write a text point file by extension (see the module table); returns attributes left out."""
     path = Path(path)
     ext = path.suffix.lower()
@@ -157,7 +156,7 @@ def write_text_points(path, points, normals=None, colors=None, labels=None, *, p
     delimiter = "," if ext == ".csv" else " "
     if ext == ".xyzc":
         if labels is None:
-            raise InputError(f"{path}: .xyzc needs a label per point; none were given")
+            raise OptionError(f"{path}: .xyzc needs a label per point; none were given")
         cols.append(labels)
         kinds += "d"
         left_out = [n for n, v in (("normals", normals), ("colors", colors)) if v is not None]
@@ -181,4 +180,4 @@ def write_text_points(path, points, normals=None, colors=None, labels=None, *, p
     with atomic_open(path, "wb") as handle:
         handle.write(head)
         handle.write(format_rows(cols, kinds, precision, delimiter))
-    return left_out
+    return (["faces"] if faces is not None else []) + left_out
