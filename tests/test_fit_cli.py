@@ -16,7 +16,7 @@ from conftest import shared_file
 
 F64 = torch.float64
 ALL = {"surface.json", "points.off", "control_points.off", "report.json", "config.json",
-       "wireframe.png", "clouds.png", "error_map.png", "loss.png"}
+       "wireframe.png", "clouds.png", "error_map.png", "loss.png", ".nurbskit-manifest.json"}
 
 
 
@@ -132,7 +132,7 @@ def test_demo_without_shared_data(tmp_path, capsys):
 
     out = tmp_path / "out"
     assert demo(["--out", str(out), "--data", str(tmp_path / "nowhere"), "--no-figures"]) == 0
-    assert {p.name for p in (out / "egg").iterdir()} == {"egg.json", "egg_points.off", "egg.obj"}
+    assert {p.name for p in (out / "egg").iterdir()} == {"egg.json", "egg_points.off", "egg.obj", ".nurbskit-manifest.json"}
     assert not (out / "duck").exists()  # no duck without the thesis data
     assert {"surface.json", "points.off", "control_points.off", "report.json", "config.json"} <= {p.name for p in (out / "fit").iterdir()}
     assert "built-in" in capsys.readouterr().out

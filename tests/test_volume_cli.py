@@ -42,7 +42,8 @@ def test_volume_command_writes_everything(tmp_path, drawings, capsys):
                    "--mesh-resolution", "40", "--loss", "silhouette"))
     err = capsys.readouterr().err
     assert rc == 0, err
-    assert sorted(p.name for p in out.iterdir()) == ["mesh.obj", "mesh.ply", "report.json", "views.png", "volume.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        ".nurbskit-manifest.json", "mesh.obj", "mesh.ply", "report.json", "views.png", "volume.json"]
     report = json.loads((out / "report.json").read_text())
     assert report["config"]["control_size"] == [10, 10, 10] and report["config"]["loss"] == "silhouette"
     assert set(report["iou"]) == {"front", "left", "top"} and min(report["iou"].values()) > 0.8
@@ -65,9 +66,17 @@ def test_existing_output_needs_overwrite(tmp_path, drawings, capsys):
     rc = main(args(drawings, out, "--iters", "1", "--quiet"))
     assert rc == 2 and "--overwrite" in capsys.readouterr().err
     assert (out / "keep.txt").exists()
+    # --overwrite never removes what nurbskit did not write: a foreign file is refused
     rc = main(args(drawings, out, "--control-size", "5", "--grid", "10", "--iters", "3", "--overwrite", "--quiet"))
-    assert rc in (0, 1)
-    assert not (out / "keep.txt").exists() and (out / "report.json").exists()
+    assert rc == 2 and "keep.txt" in capsys.readouterr().err
+    assert (out / "keep.txt").read_text() == "x" and not (out / "report.json").exists()
+    # a folder that holds only an earlier run's outputs is replaced with --overwrite
+    (out / "keep.txt").unlink()
+    out.rmdir()
+    assert main(args(drawings, out, "--control-size", "5", "--grid", "10", "--iters", "3", "--quiet")) in (0, 1)
+    first = (out / "report.json").stat().st_mtime_ns
+    assert main(args(drawings, out, "--control-size", "5", "--grid", "10", "--iters", "3", "--overwrite", "--quiet")) in (0, 1)
+    assert (out / "report.json").stat().st_mtime_ns >= first
 
 
 def test_empty_result_is_reported_not_hidden(tmp_path, drawings, capsys):

@@ -91,15 +91,20 @@ def load_input(path: str | Path, resolution: tuple[int, int]):
     if path.is_dir():
         raise InputError(f"{path}: is a directory, expected a point, mesh, NURBS or .npy file")
     if path.suffix.lower() == ".npy":
+        # A supervised target grid (R, S, 3) is read here; anything else goes to the io
+        # reader, which checks counts, memory and non-finite values like every format.
         try:
-            arr = np.load(path, allow_pickle=False)
+            header = np.load(path, mmap_mode="r", allow_pickle=False)
         except (ValueError, OSError) as exc:
             raise InputError(f"{path}: not a readable .npy array ({exc})") from None
-        if arr.ndim == 3 and arr.shape[-1] == 3:
-            return "grid", np.asarray(arr, dtype=np.float64)
-        if arr.ndim == 2 and arr.shape[-1] == 3:
-            return "points", np.asarray(arr, dtype=np.float64)
-        raise InputError(f"{path}: expected an array shaped (R, S, 3) or (N, 3), got {arr.shape}")
+        if header.ndim == 3 and header.shape[-1] == 3:
+            grid = np.asarray(header, dtype=np.float64)
+            if grid.size == 0 or not np.isfinite(grid).all():
+                raise InputError(f"{path}: a target grid must be non-empty and finite, got shape {grid.shape}")
+            return "grid", grid
+        if header.ndim != 2 or header.shape[-1] != 3:
+            raise InputError(f"{path}: expected an array shaped (R, S, 3) or (N, 3), got {header.shape}")
+        del header
     if is_nurbs_file(path):
         surface = read_nurbs(path)
         if getattr(surface, "para_dim", None) != 2 or surface.dim != 3:
@@ -129,7 +134,7 @@ def run_fit(args) -> int:
     # Refuse a bad --out before the (possibly long) fit.
     from .._fs import check_output_dir
 
-    check_output_dir(args.out, args.overwrite)
+    check_output_dir(args.out, args.overwrite, inputs=[args.input])
 
     kind, data = load_input(args.input, resolution)
     supervised_input = kind in ("surface", "grid")
@@ -195,7 +200,7 @@ def run_fit(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    with output_directory(args.out, args.overwrite) as tmp:
+    with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         report = write_fit_outputs(result, tmp, figures=not args.no_figures)
     m = report["metrics"]
     line = (

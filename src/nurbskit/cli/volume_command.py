@@ -58,7 +58,7 @@ def run(args) -> int:
     cfg = config_from_args(args, get_preset(args.preset))
     device, dtype = device_and_dtype(args)
     check_fit_size(cfg, 8 if str(dtype).endswith("64") else 4)
-    check_output_dir(args.out, args.overwrite)
+    check_output_dir(args.out, args.overwrite, inputs=[args.front, args.left, args.top])
     drawings = {name: load_drawing(getattr(args, name), name=name).to(device, dtype) for name in ("front", "left", "top")}
 
     bar = None
@@ -87,7 +87,7 @@ def run(args) -> int:
     report = result.report()
     report["preset"] = args.preset
     report["inputs"] = {"front": str(args.front), "left": str(args.left), "top": str(args.top)}
-    with output_directory(args.out, args.overwrite) as tmp:
+    with output_directory(args.out, args.overwrite, inputs=[args.front, args.left, args.top]) as tmp:
         write_mesh(tmp / "mesh.obj", result.mesh.vertices, result.mesh.faces)
         write_mesh(tmp / "mesh.ply", result.mesh.vertices, result.mesh.faces)
         save(result.volume, tmp / "volume.json")

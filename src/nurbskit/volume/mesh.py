@@ -9,30 +9,14 @@ seen from outside (outward normals by the right-hand rule).
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 import torch
 
 from ..errors import NurbskitError
+from ..io._base import Mesh  # the one mesh type of the package
 from .views import View, points_to_pixels
 
 Tensor = torch.Tensor
-
-
-class Mesh(NamedTuple):
-    """A triangle mesh: ``vertices (V, 3)`` float64, ``faces (F, 3)`` int64."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-
-    @property
-    def is_empty(self) -> bool:
-        return len(self.faces) == 0
-
-    @staticmethod
-    def empty() -> "Mesh":
-        return Mesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
 
 
 def isosurface(grid: Tensor | np.ndarray, isovalue: float) -> Mesh:
