@@ -98,7 +98,7 @@ def load_input(path: str | Path, resolution: tuple[int, int]):
         except (ValueError, OSError) as exc:
             raise InputError(f"{path}: not a readable .npy array ({exc})") from None
         if header.ndim == 3 and header.shape[-1] == 3:
-            grid = np.asarray(header, dtype=np.float64)
+            grid = np.array(header, dtype=np.float64)  # a copy: the memory map is read-only
             if grid.size == 0 or not np.isfinite(grid).all():
                 raise InputError(f"{path}: a target grid must be non-empty and finite, got shape {grid.shape}")
             return "grid", grid
