@@ -1,0 +1,377 @@
+"""The studio server: one viser server, one :class:`Session` per browser tab.
+
+Each connected client gets its own GUI (``client.gui``) and its own scene
+(``client.scene``), built by the tab builders of :mod:`.registry`, and its own
+:class:`Session` holding what it loaded and fitted: two browser tabs never share
+state. Long work (fits) runs on a worker thread per tab, reports progress through the
+library's callbacks and can be stopped; an exception is shown in the page and the
+server carries on.
+
+The widgets every tab shares (:class:`Loader`, :class:`RunPanel`, :class:`ExportPanel`,
+:class:`Status`) live here; the tabs only wire them to the library's public API.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._optional import require
+from ..errors import NurbskitError, OptionError
+from .registry import available_tabs, cad_writers
+from .workdir import Workdir, check_upload
+
+DEFAULT_MAX_UPLOAD = 200 * 1024 * 1024
+PROGRESS_INTERVAL = 0.1  # seconds between progress redraws (10 per second at most)
+
+
+class Stopped(Exception):
+    """Raised inside a progress callback when the user pressed Stop."""
+
+
+@dataclass
+class StudioOptions:
+    """What the command line sets."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    workdir: Path = field(default_factory=Path.cwd)
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD
+
+
+# ---- widgets shared by every tab ---------------------------------------------------------
+
+class Status:
+    """One line of status per tab: information, or an error shown in red (and as a toast)."""
+
+    def __init__(self, session: "Session", ui):
+        self.session = session
+        self.handle = ui.add_html("<div></div>")
+
+    def info(self, text: str) -> None:
+        self.handle.content = f"<div class='studio-status'>{html.escape(text)}</div>"
+
+    def error(self, text: str) -> None:
+        self.handle.content = (
+            f"<div class='studio-error' style='color:#c92a2a'><b>Error:</b> {html.escape(text)}</div>"
+        )
+        try:
+            self.session.client.add_notification("Error", text, color="red", auto_close_seconds=8.0)
+        except Exception:  # a closed browser tab: nothing to show it in
+            pass
+
+
+def describe_error(exc: BaseException) -> str:
+    """The message people see: a NurbskitError's own words, else type and message."""
+    if isinstance(exc, NurbskitError):
+        return str(exc)
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or exc}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+class Loader:
+    """Upload a file, or pick one from the workdir; ``read(path)`` turns it into data.
+
+    The upload is size-checked, written under the workdir's scratch folder with a
+    made-up name, read by ``read`` (nurbskit's readers: the content decides), and the
+    scratch file is deleted whatever happens.
+    """
+
+    def __init__(self, session: "Session", ui, status: Status, read: Callable[[Path, str], object],
+                 on_loaded: Callable[[object, str], None], label: str = "Load"):
+        self.session, self.status, self.read, self.on_loaded = session, status, read, on_loaded
+        self.upload = ui.add_upload_button(f"{label}: upload a file", icon=None)
+        self.choice = ui.add_dropdown("Workdir file", self._options(), initial_value="")
+        self.path = ui.add_text("Path in workdir", "")
+        self.load = ui.add_button(f"{label} from workdir")
+        self.refresh = ui.add_button("Refresh file list")
+        self.upload.on_upload(lambda event: self._guard(self._from_upload))
+        self.load.on_click(lambda event: self._guard(self._from_workdir))
+        self.refresh.on_click(lambda event: self._refresh())
+        self.choice.on_update(lambda event: self._choose())
+
+    def _options(self) -> tuple[str, ...]:
+        return ("",) + tuple(self.session.workdir.files())
+
+    def _refresh(self) -> None:
+        self.choice.options = self._options()
+
+    def _choose(self) -> None:
+        if self.choice.value:
+            self.path.value = self.choice.value
+
+    def _guard(self, fn) -> None:
+        try:
+            fn()
+        except Exception as exc:  # shown in the page; the server carries on
+            self.status.error(describe_error(exc))
+
+    def _from_upload(self) -> None:
+        file = self.upload.value
+        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
+        tmp = self.session.workdir.scratch(file.name)
+        try:
+            tmp.write_bytes(file.content)
+            data = self.read(tmp, Path(file.name).name)
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.on_loaded(data, Path(file.name).name)
+
+    def _from_workdir(self) -> None:
+        name = self.path.value or self.choice.value
+        path = self.session.workdir.resolve(name)
+        data = self.read(path, name)
+        self.on_loaded(data, name)
+
+
+class RunPanel:
+    """Run / Stop buttons, a progress bar, a loss curve and the metrics of the last run."""
+
+    def __init__(self, session: "Session", ui, status: Status, start: Callable[[Callable, threading.Event], object],
+                 done: Callable[[object], None], label: str = "Run"):
+        from viser import uplot
+
+        self.session, self.status, self.start, self.done = session, status, start, done
+        self.run = ui.add_button(label)
+        self.stop = ui.add_button("Stop", disabled=True)
+        self.bar = ui.add_progress_bar(0.0)
+        self.curve = ui.add_uplot(
+            (np.zeros(1), np.zeros(1)),
+            (uplot.Series(label="iteration"), uplot.Series(label="loss", stroke="#1c7ed6", width=2)),
+            title="Loss", scales={"x": {"time": False}, "y": {"distr": 3}}, aspect=1.6,
+        )
+        self.metrics = ui.add_markdown("")
+        self.thread: threading.Thread | None = None
+        self.stop_event = threading.Event()
+        self.updates = 0
+        self.losses: list[float] = []
+        self.run.on_click(lambda event: self.launch())
+        self.stop.on_click(lambda event: self.stop_event.set())
+
+    @property
+    def running(self) -> bool:
+        return self.thread is not None and self.thread.is_alive()
+
+    def launch(self) -> None:
+        if self.running:
+            self.status.error("a run is already in progress; stop it first")
+            return
+        self.stop_event = threading.Event()
+        self.losses, self.updates = [], 0
+        self.bar.value, self.bar.animated = 0.0, True
+        self.run.disabled, self.stop.disabled = True, False
+        self.metrics.content = ""
+        self.status.info("running ...")
+        self.thread = threading.Thread(target=self._work, name="nurbskit-studio-run", daemon=True)
+        self.thread.start()
+
+    def _work(self) -> None:
+        last = [0.0]
+
+        def progress(fraction: float, loss: float | None = None) -> None:
+            if self.stop_event.is_set():
+                raise Stopped()
+            if loss is not None and np.isfinite(loss):
+                self.losses.append(float(loss))
+            now = time.perf_counter()
+            if now - last[0] >= PROGRESS_INTERVAL or fraction >= 1.0:
+                last[0] = now
+                self._show_progress(fraction)
+
+        try:
+            result = self.start(progress, self.stop_event)
+            self._show_progress(1.0)
+            self.done(result)
+        except Stopped:
+            self.status.info("stopped; nothing was kept from the interrupted run")
+        except Exception as exc:  # the page says what failed; the server keeps serving
+            self.status.error(describe_error(exc))
+            self.session.log_exception(exc)
+        finally:
+            self.bar.animated = False
+            self.run.disabled, self.stop.disabled = False, True
+
+    def _show_progress(self, fraction: float) -> None:
+        self.updates += 1
+        self.bar.value = float(min(100.0, max(0.0, 100.0 * fraction)))
+        if self.losses:
+            y = np.asarray(self.losses, dtype=np.float64)
+            self.curve.data = (np.arange(1, y.size + 1, dtype=np.float64), np.maximum(y, 1e-300))
+
+
+EXPORT_FORMATS = {
+    "nurbskit JSON": ".json",
+    "geomdl JSON": ".geomdl.json",
+    "Rhino .3dm": ".3dm",
+    "OBJ mesh": ".obj",
+    "PLY mesh": ".ply",
+}
+
+
+class ExportPanel:
+    """Download what the tab shows (NURBS files, meshes, CAD once available) or a screenshot.
+
+    ``shown()`` returns ``(nurbs or None, (vertices, faces) or None, stem)``.
+    """
+
+    def __init__(self, session: "Session", ui, status: Status, shown: Callable[[], tuple]):
+        self.session, self.status, self.shown = session, status, shown
+        self.cad = cad_writers()
+        formats = tuple(EXPORT_FORMATS) + tuple(self.cad)
+        self.format = ui.add_dropdown("Export format", formats, initial_value=formats[0])
+        self.download = ui.add_button("Download")
+        self.save_name = ui.add_text("Save as (in workdir)", "")
+        self.save = ui.add_button("Save to workdir")
+        self.screenshot = ui.add_button("Screenshot")
+        self.download.on_click(lambda event: self._guard(self._download))
+        self.save.on_click(lambda event: self._guard(self._save))
+        self.screenshot.on_click(lambda event: self._guard(self._screenshot))
+
+    def _guard(self, fn) -> None:
+        try:
+            fn()
+        except Exception as exc:
+            self.status.error(describe_error(exc))
+
+    def write(self, path: Path) -> None:
+        """Write what is shown to ``path`` in the chosen format."""
+        import nurbskit
+
+        obj, mesh, _ = self.shown()
+        fmt = self.format.value
+        if fmt in ("OBJ mesh", "PLY mesh"):
+            if mesh is None:
+                if obj is None or obj.para_dim != 2:
+                    raise OptionError("nothing to export as a mesh yet")
+                t = nurbskit.tessellate(obj.detach().to(dtype=__import__("torch").float64), (64, 64))
+                mesh = (t.vertices.numpy(), t.faces.numpy())
+            nurbskit.io.write_mesh(path, mesh[0], mesh[1])
+            return
+        if obj is None:
+            raise OptionError("nothing to export as NURBS yet; load, fit or create an object first")
+        obj = obj.detach()
+        if fmt in self.cad:
+            self.cad[fmt][1](path, obj)
+        elif fmt == "geomdl JSON":
+            nurbskit.io.write_nurbs(path, obj, format="geomdl")
+        else:
+            nurbskit.io.write_nurbs(path, obj)
+
+    def extension(self) -> str:
+        fmt = self.format.value
+        return self.cad[fmt][0] if fmt in self.cad else EXPORT_FORMATS[fmt]
+
+    def _download(self) -> None:
+        _, _, stem = self.shown()
+        ext = self.extension()
+        tmp = self.session.workdir.scratch("x" + Path(ext).suffix, kind="exports")
+        try:
+            self.write(tmp)
+            content = tmp.read_bytes()
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.session.client.send_file_download(f"{stem}{ext}", content, save_immediately=True)
+        self.status.info(f"downloaded {stem}{ext} ({len(content):,} bytes)")
+
+    def _save(self) -> None:
+        name = self.save_name.value.strip()
+        path = self.session.workdir.output_name(name)
+        self.write(path)
+        self.status.info(f"saved {name}")
+
+    def _screenshot(self) -> None:
+        from PIL import Image
+
+        image = self.session.client.get_render(720, 1280, transport_format="png", timeout=20.0)
+        buffer = io.BytesIO()
+        Image.fromarray(image).save(buffer, format="PNG")
+        self.session.client.send_file_download("nurbskit-studio.png", buffer.getvalue(), save_immediately=True)
+        self.status.info("screenshot downloaded")
+
+
+# ---- one browser tab ---------------------------------------------------------------------
+
+class Session:
+    """Everything one browser tab (viser client) has: its GUI, scene and data."""
+
+    def __init__(self, studio: "Studio", client):
+        self.studio, self.client = studio, client
+        self.options, self.workdir = studio.options, studio.workdir
+        self.tabs: dict[str, object] = {}
+        self.errors: list[str] = []
+        client.scene.set_up_direction("+z")
+        with client.gui.add_folder("nurbskit studio", expand_by_default=True):
+            group = client.gui.add_tab_group()
+            for spec in studio.tabs:
+                with group.add_tab(spec.label):
+                    builder = spec.load_builder()
+                    self.tabs[spec.label] = builder(self, client.gui)
+        self.group = group
+
+    def focus(self, label: str) -> None:
+        """Show the scene of tab ``label`` only."""
+        for name, tab in self.tabs.items():
+            root = getattr(tab, "root", None)
+            if root is not None:
+                root.visible = name == label
+
+    def log_exception(self, exc: BaseException) -> None:
+        self.errors.append("".join(traceback.format_exception(exc)))
+
+
+class Studio:
+    """The server. ``Studio(options).start()``; ``url``; ``stop()``."""
+
+    def __init__(self, options: StudioOptions):
+        self.options = options
+        self.workdir = Workdir(options.workdir)
+        self.tabs = available_tabs()
+        self.sessions: dict[int, Session] = {}
+        self.server = None
+        self._lock = threading.Lock()
+
+    def start(self) -> "Studio":
+        viser = require("viser", "studio", "nurbskit studio")
+        self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
+        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+        return self
+
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        host = self.options.host
+        shown = f"[{host}]" if ":" in host else host
+        return f"http://{shown}:{self.port}/"
+
+    def _connect(self, client) -> None:
+        session = Session(self, client)
+        with self._lock:
+            self.sessions[client.client_id] = session
+
+    def _disconnect(self, client) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            for tab in session.tabs.values():
+                panel = getattr(tab, "runner", None)
+                if panel is not None:
+                    panel.stop_event.set()
+
+    def stop(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
