@@ -33,7 +33,7 @@ CHROMIUM = os.environ.get("NURBSKIT_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 UPLOAD_LIMIT = 64 * 1024
-VIEWPORT = {"width": 1400, "height": 900}
+VIEWPORT = {"width": 1000, "height": 700}
 SHOTS = os.environ.get("NURBSKIT_STUDIO_SHOTS")  # a folder: save a screenshot of every tab there
 
 
@@ -105,7 +105,7 @@ def page(browser, studio):
     pg = context.new_page()
     before = set(studio.sessions)
     pg.goto(studio.url)
-    pg.get_by_role("tab", name="Unsupervised").wait_for(timeout=30000)
+    pg.get_by_role("tab", name="Unsupervised", exact=True).wait_for(timeout=30000)
     _wait(lambda: set(studio.sessions) - before, "a session for the page")
     pg.session = studio.sessions[max(set(studio.sessions) - before)]
     yield pg
@@ -125,8 +125,8 @@ def _wait(predicate, what: str, timeout: float = 30.0):
 def field(page, label: str, nth: int = 0):
     """The input whose label reads ``label`` (viser labels point at their input by id)."""
     lab = page.locator("label", has_text=label).first
-    lab.wait_for(timeout=10000)
-    return page.locator(f"[id='{lab.get_attribute('for')}']").nth(nth)
+    lab.wait_for(timeout=20000)
+    return lab.locator("xpath=ancestor::div[2]").locator("input").nth(nth)
 
 
 def set_number(page, label: str, value) -> None:
@@ -139,7 +139,7 @@ def viewport_pixels(page) -> np.ndarray:
     """The 3-D viewport (the canvas left of the panel) as an RGB array."""
     from PIL import Image
 
-    png = page.screenshot(clip={"x": 320, "y": 160, "width": 620, "height": 620})
+    png = page.screenshot(clip={"x": 0, "y": 160, "width": 590, "height": 470})
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
 
 
@@ -173,7 +173,7 @@ def outside_untouched(area) -> None:
 
 def test_page_shows_tabs_and_draws(page):
     for name in ("Unsupervised", "Supervised", "NURBS Generator", "Volume from drawings"):
-        assert page.get_by_role("tab", name=name).is_visible()
+        assert page.get_by_role("tab", name=name, exact=True).is_visible()
     # the generator's first surface is on screen: the viewport is not blank
     _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface to be drawn")
 
@@ -213,7 +213,7 @@ def test_stop_and_error_keep_the_server(page):
     page.get_by_text("loaded cloud.ply").wait_for(timeout=20000)
     # a failing fit: degree 3 on 2 x 2 control points
     set_number(page, "Iterations", 5)
-    boxes = field(page, "Control grid")
+    boxes = field(page, "Control grid", 0)
     boxes.fill("2")
     boxes.press("Enter")
     _wait(lambda: tuple(tab.ctrl.value)[0] == 2, "the control grid to reach the server")
@@ -276,17 +276,16 @@ def test_workdir_paths_are_confined(page, area, path, expected):
 
 def test_generator_edit_changes_the_render(page):
     tab = page.session.tabs["NURBS Generator"]
-    page.get_by_role("tab", name="NURBS Generator").click()
+    page.get_by_role("tab", name="NURBS Generator", exact=True).click()
     field(page, "Point position").wait_for(timeout=10000)
     _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface")
     shot(page, "studio-generator.png")
     before = viewport_pixels(page)
     updates = tab.updates
     cp_before = tab.obj.control_points.clone()
-    z = field(page, "Point position", 0)  # label points at the first of the three inputs
-    inputs = page.locator(f"[id='{z.get_attribute('id')}']").locator("xpath=ancestor::div[2]").locator("input")
-    inputs.nth(2).fill("0.9")
-    inputs.nth(2).press("Enter")
+    z = field(page, "Point position", 2)
+    z.fill("0.9")
+    z.press("Enter")
     _wait(lambda: tab.updates > updates, "the control point update")
     moved = (tab.obj.control_points - cp_before).abs().sum(-1) > 0
     assert int(moved.sum()) == 1 and float(tab.obj.control_points[2, 2, 2]) == 0.9
@@ -309,7 +308,7 @@ def test_generator_knot_ops_and_export_download(page, area, tmp_path):
     import nurbskit
 
     tab = page.session.tabs["NURBS Generator"]
-    page.get_by_role("tab", name="NURBS Generator").click()
+    page.get_by_role("tab", name="NURBS Generator", exact=True).click()
     before = tab.obj.clone()
     page.get_by_role("button", name="Insert knot").click()
     _wait(lambda: tab.obj.sizes[0] == before.sizes[0] + 1, "the knot insertion")
@@ -331,7 +330,7 @@ def test_generator_knot_ops_and_export_download(page, area, tmp_path):
 def test_screenshot_download(page, tmp_path):
     from PIL import Image
 
-    page.get_by_role("tab", name="NURBS Generator").click()
+    page.get_by_role("tab", name="NURBS Generator", exact=True).click()
     with page.expect_download(timeout=30000) as info:
         page.get_by_role("button", name="Screenshot").click()
     path = tmp_path / "shot.png"
@@ -342,7 +341,7 @@ def test_screenshot_download(page, tmp_path):
 
 def test_supervised_fit_side_by_side(page, area):
     tab = page.session.tabs["Supervised"]
-    page.get_by_role("tab", name="Supervised").click()
+    page.get_by_role("tab", name="Supervised", exact=True).click()
     field(page, "Path in workdir").fill("target.json")
     page.get_by_role("button", name="Load NURBS from workdir").click()
     page.get_by_text("loaded target.json").wait_for(timeout=20000)
@@ -363,7 +362,7 @@ def test_clients_do_not_share_state(browser, studio, area):
         pg = ctx.new_page()
         before = set(studio.sessions)
         pg.goto(studio.url)
-        pg.get_by_role("tab", name="Unsupervised").wait_for(timeout=30000)
+        pg.get_by_role("tab", name="Unsupervised", exact=True).wait_for(timeout=30000)
         _wait(lambda: set(studio.sessions) - before, "a session")
         pages.append((ctx, pg, studio.sessions[max(set(studio.sessions) - before)]))
     (c1, p1, s1), (c2, p2, s2) = pages
@@ -380,7 +379,7 @@ def test_clients_do_not_share_state(browser, studio, area):
 
 def test_volume_tab(page):
     tab = page.session.tabs["Volume from drawings"]
-    page.get_by_role("tab", name="Volume from drawings").click()
+    page.get_by_role("tab", name="Volume from drawings", exact=True).click()
     page.get_by_role("button", name="Use the paper's drawings").click()
     page.get_by_text("the paper's drawings").wait_for(timeout=20000)
     set_number(page, "Control values per axis", 8)

@@ -324,6 +324,20 @@ class Session:
             if root is not None:
                 root.visible = name == label
 
+    def frame(self, points) -> None:
+        """Point the camera at ``points (N, 3)`` from a three-quarter view."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts.size == 0 or not np.isfinite(pts).all():
+            return
+        lo, hi = pts.min(0), pts.max(0)
+        center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
+        camera = self.client.camera
+        if camera._state.update_timestamp == 0.0:
+            return  # the browser has not reported its camera yet (still connecting)
+        # position first, then look_at: viser keeps the look-at point fixed that way
+        camera.position = center + size * np.array([0.9, -1.2, 0.9])
+        camera.look_at = center
+
     def log_exception(self, exc: BaseException) -> None:
         self.errors.append("".join(traceback.format_exception(exc)))
 
@@ -343,6 +357,10 @@ class Studio:
         viser = require("viser", "studio", "nurbskit studio")
         self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        # No HDRI environment (a texture download the machine may not reach, and slow in
+        # software WebGL) and no shadow maps: the default lights shade the surfaces.
+        self.server.scene.configure_environment_map(None)
+        self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         return self

@@ -163,7 +163,7 @@ class GeneratorTab:
             self.set_object(obj, free)
             self.status.info(f"created a {obj.kind} with {tuple(obj.sizes)} control points")
 
-    def set_object(self, obj, periodic_free=None, other=None) -> None:
+    def set_object(self, obj, periodic_free=None, other=None, frame: bool = True) -> None:
         with self.lock:
             self.obj = obj.to(torch.float64).clone()
             self.periodic_free = periodic_free
@@ -177,6 +177,8 @@ class GeneratorTab:
                 self.other_view.draw(other.to(torch.float64))
             self._describe()
             self._select()
+            if frame:
+                self.session.frame(self.obj.control_points.numpy()[..., :3])
 
     def _describe(self) -> None:
         o = self.obj
@@ -288,7 +290,7 @@ class GeneratorTab:
                 obj, other = nurbskit.split(self.obj, value, axis=axis)
                 note = (f"split at {value:.4g} along {self.axis.value}: the first piece is edited, "
                         "the second is shown in grey")
-            self.set_object(obj, None, other)
+            self.set_object(obj, None, other, frame=False)
             self.status.info(note)
 
     def shown(self):

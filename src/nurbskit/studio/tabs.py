@@ -113,6 +113,7 @@ class UnsupervisedTab:
         self.session.focus(self.label)
         self.surface_view.clear()
         self.cloud_handle = draw_points(self.session.client.scene, "/unsupervised/input", points)
+        self.session.frame(points)
         self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
 
     # fitting
@@ -223,6 +224,7 @@ class SupervisedTab:
         self.session.focus(self.label)
         self.result_view.clear()
         self.truth_view.draw(self.target)
+        self.session.frame(self.target.control_points.numpy())
         self.status.info(f"loaded {name}: {obj.kind} {tuple(obj.sizes)} degrees {tuple(obj.degrees)}")
 
     def _fit(self, progress, stop):
@@ -256,6 +258,8 @@ class SupervisedTab:
         self.result_view.offset = np.array([shift, 0.0, 0.0])
         self.result_view.shape_key = None
         self.result_view.draw(surface)
+        self.session.frame(np.concatenate([self.target.control_points.numpy().reshape(-1, 3),
+                                           surface.control_points.numpy().reshape(-1, 3) + [shift, 0.0, 0.0]]))
         self.runner.metrics.content = _metrics_markdown(report)
         self.status.info(f"fit finished: RMS {report.get('rms', float('nan')):.3g} to the target; "
                          "ground truth left (blue), result right (orange)")
@@ -337,6 +341,7 @@ class VolumeTab:
             self.status.error(fit.message or "the fitted volume has no isosurface")
             return
         draw_mesh(self.session.client.scene, "/volume/mesh", fit.mesh.vertices, fit.mesh.faces)
+        self.session.frame(fit.mesh.vertices)
         rows = "\n".join(f"| IoU {k} | {v:.3f} |" for k, v in fit.iou.items())
         self.runner.metrics.content = (f"**Metrics**\n\n| | |\n|---|---|\n| iterations | {fit.iterations} |\n{rows}")
         self.status.info(f"volume fitted: {len(fit.mesh.faces):,} triangles")
