@@ -124,7 +124,7 @@ def _wait(predicate, what: str, timeout: float = 30.0):
 
 def field(page, label: str, nth: int = 0):
     """The input whose label reads ``label`` (viser labels point at their input by id)."""
-    lab = page.locator("label", has_text=label).first
+    lab = page.locator("label:visible", has_text=label).first
     lab.wait_for(timeout=20000)
     return lab.locator("xpath=ancestor::div[2]").locator("input").nth(nth)
 
@@ -317,8 +317,11 @@ def test_generator_knot_ops_and_export_download(page, area, tmp_path):
     page.get_by_role("button", name="Elevate degree").click()
     _wait(lambda: tab.obj.degrees[0] == 4, "the degree elevation")
     assert_close(tab.obj.evaluate(uv), before.evaluate(uv), atol=1e-10)
-    with page.expect_download(timeout=20000) as info:
-        page.get_by_role("button", name="Download").click()
+    try:
+        with page.expect_download(timeout=20000) as info:
+            page.get_by_role("button", name="Download").click()
+    except Exception:
+        raise AssertionError(page.locator(".studio-status:visible, .studio-error:visible").all_inner_texts())
     path = tmp_path / info.value.suggested_filename
     info.value.save_as(path)
     back = nurbskit.io.read_nurbs(path)

@@ -273,9 +273,12 @@ class ExportPanel:
     def _download(self) -> None:
         _, _, stem = self.shown()
         ext = self.extension()
-        tmp = self.session.workdir.scratch("x" + Path(ext).suffix, kind="exports")
+        tmp = self.session.workdir.scratch(f"export{ext}", kind="exports")
         try:
-            self.write(tmp)
+            try:
+                self.write(tmp)
+            except Exception as exc:  # name the download, not the scratch file
+                raise type(exc)(str(exc).replace(str(tmp), f"{stem}{ext}")) from None
             content = tmp.read_bytes()
         finally:
             tmp.unlink(missing_ok=True)
