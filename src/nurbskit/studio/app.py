@@ -316,6 +316,10 @@ class Session:
             group = client.gui.add_tab_group()
             for spec in studio.tabs:
                 with group.add_tab(spec.label):
+                    # viser reports no tab switches: the 3-D view shows the tab last acted
+                    # in, and this button brings a tab's objects back
+                    show = client.gui.add_button("Show this tab in the 3-D view", color="gray")
+                    show.on_click(lambda event, label=spec.label: self.focus(label))
                     builder = spec.load_builder()
                     self.tabs[spec.label] = builder(self, client.gui)
         self.group = group
