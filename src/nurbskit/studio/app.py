@@ -31,6 +31,7 @@ from .workdir import Workdir, check_upload
 
 DEFAULT_MAX_UPLOAD = 200 * 1024 * 1024
 PROGRESS_INTERVAL = 0.1  # seconds between progress redraws (10 per second at most)
+HEARTBEAT = 0.25  # seconds between "still running" lines while no iteration reports
 
 
 class Stopped(Exception):
@@ -149,8 +150,11 @@ class RunPanel:
             (uplot.Series(label="iteration"), uplot.Series(label="loss", stroke="#1c7ed6", width=2)),
             title="Loss", scales={"x": {"time": False}, "y": {"distr": 3}}, aspect=1.6,
         )
+        self.clock = ui.add_markdown("")
         self.metrics = ui.add_markdown("")
         self.thread: threading.Thread | None = None
+        self.heartbeats = 0
+        self._fraction = 0.0
         self.stop_event = threading.Event()
         self.updates = 0
         self.losses: list[float] = []
@@ -173,6 +177,22 @@ class RunPanel:
         self.status.info("running ...")
         self.thread = threading.Thread(target=self._work, name="nurbskit-studio-run", daemon=True)
         self.thread.start()
+        threading.Thread(target=self._beat, args=(self.thread,), name="nurbskit-studio-clock", daemon=True).start()
+
+    def _beat(self, worker: threading.Thread) -> None:
+        """Elapsed time and iteration count, a few times a second, for as long as the run lasts.
+
+        Some phases report no iterations (the initial surface, the least-squares
+        alternation, the final report); the page still shows that work goes on.
+        """
+        t0 = time.perf_counter()
+        while worker.is_alive():
+            worker.join(HEARTBEAT)
+            if worker.is_alive():
+                self.heartbeats += 1
+                self.clock.content = (f"running for {time.perf_counter() - t0:.1f} s; "
+                                      f"{len(self.losses)} iterations, {100 * self._fraction:.0f} %")
+        self.clock.content = f"last run: {time.perf_counter() - t0:.1f} s, {len(self.losses)} iterations"
 
     def _work(self) -> None:
         last = [0.0]
@@ -202,6 +222,7 @@ class RunPanel:
 
     def _show_progress(self, fraction: float) -> None:
         self.updates += 1
+        self._fraction = fraction
         self.bar.value = float(min(100.0, max(0.0, 100.0 * fraction)))
         if self.losses:
             y = np.asarray(self.losses, dtype=np.float64)
