@@ -172,9 +172,25 @@ def non_background(pixels: np.ndarray) -> int:
 
 
 def shot(page, name: str) -> None:
+    """With NURBSKIT_STUDIO_SHOTS=folder, save the page (notifications closed) for the docs."""
     if SHOTS:
+        for button in page.locator(".mantine-Notification-root button").all():
+            try:
+                button.click(timeout=2000)
+            except Exception:
+                pass
+        time.sleep(1.0)
         Path(SHOTS).mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(Path(SHOTS) / name))
+
+
+def see(page, text: str, timeout: float = 60000) -> None:
+    """Wait until ``text`` is visible; on timeout say what the status lines show instead."""
+    try:
+        page.get_by_text(text).first.wait_for(timeout=timeout)
+    except Exception:
+        shown = page.locator(".studio-status:visible, .studio-error:visible").all_inner_texts()
+        raise AssertionError(f"{text!r} did not appear; the page says {shown}") from None
 
 
 def error_text(page) -> str:
@@ -208,13 +224,13 @@ def test_unsupervised_fit_from_workdir(page, area):
     field(page, "Path in workdir").fill("cloud.ply")
     field(page, "Path in workdir").press("Enter")
     page.get_by_role("button", name="Load cloud or mesh from workdir").click()
-    page.get_by_text("loaded cloud.ply: 600 points").wait_for(timeout=20000)
+    see(page, "loaded cloud.ply: 600 points", 20000)
     set_number(page, "Iterations", 10)
     _wait(lambda: tab.iters.value == 10, "the iteration count to reach the server")
     before = viewport_pixels(page)
     page.get_by_role("button", name="Fit", exact=True).click()
-    page.get_by_text("fit finished").wait_for(timeout=60000)
-    page.get_by_text("Chamfer").wait_for(timeout=10000)
+    see(page, "fit finished", 60000)
+    see(page, "Chamfer", 10000)
     report_text = page.locator("td", has_text="of diag.").first.inner_text()
     # the page shows the fit's own numbers
     from nurbskit.fit import fit_report
@@ -222,6 +238,7 @@ def test_unsupervised_fit_from_workdir(page, area):
     chamfer = fit_report(tab.result)["metrics"]["chamfer"]
     assert f"{chamfer:.4g}" in report_text
     assert tab.result.iterations == 10 and tab.runner.updates >= 2
+    see(page, "last run:", 10000)  # the elapsed-time line
     time.sleep(0.5)
     after = viewport_pixels(page)
     assert non_background(after) > 2000
@@ -234,7 +251,7 @@ def test_stop_and_error_keep_the_server(page):
     tab = page.session.tabs["Unsupervised"]
     field(page, "Path in workdir").fill("cloud.ply")
     page.get_by_role("button", name="Load cloud or mesh from workdir").click()
-    page.get_by_text("loaded cloud.ply").wait_for(timeout=20000)
+    see(page, "loaded cloud.ply", 20000)
     # a failing fit: degree 3 on 2 x 2 control points
     set_number(page, "Iterations", 5)
     boxes = field(page, "Control grid", 0)
@@ -251,7 +268,7 @@ def test_stop_and_error_keep_the_server(page):
     page.get_by_role("button", name="Fit", exact=True).click()
     _wait(lambda: tab.runner.updates >= 3, "progress updates")
     page.get_by_role("button", name="Stop").click()
-    page.get_by_text("stopped").wait_for(timeout=20000)
+    see(page, "stopped", 20000)
     assert tab.result is None and not tab.runner.running
 
 
@@ -267,7 +284,7 @@ def test_mesh_upload_is_poisson_sampled(page, area):
     _wait(lambda: tab.count.value == 300, "the sample count")
     page.locator("input[type=file]").set_input_files(
         files=[{"name": "ball.obj", "mimeType": "text/plain", "buffer": buffer.getvalue()}])
-    page.get_by_text("300 Poisson samples").wait_for(timeout=20000)
+    see(page, "300 Poisson samples", 20000)
     r = np.linalg.norm(tab.points, axis=1)
     assert tab.points.shape == (300, 3) and r.max() <= 1.0 + 1e-9 and r.min() > 0.9
     outside_untouched(area)
@@ -374,7 +391,10 @@ def test_supervised_fit_side_by_side(page, area):
     tab = page.session.tabs["Supervised"]
     field(page, "Path in workdir").fill("target.json")
     page.get_by_role("button", name="Load NURBS from workdir").click()
-    page.get_by_text("loaded target.json").wait_for(timeout=20000)
+    see(page, "loaded target.json", 20000)
+    field(page, "Pipeline").click()
+    page.get_by_role("option", name="SOC", exact=True).click()
+    _wait(lambda: tab.pipeline.value == "SOC", "the pipeline choice")
     set_number(page, "Iterations", 20)
     for i in (0, 1):
         grid = field(page, "Target grid", i)
@@ -382,7 +402,7 @@ def test_supervised_fit_side_by_side(page, area):
         grid.press("Enter")
     _wait(lambda: tab.iters.value == 20 and tuple(tab.resolution.value) == (12, 12), "the settings")
     page.get_by_role("button", name="Fit", exact=True).click()
-    page.get_by_text("RMS to target").wait_for(timeout=60000)
+    see(page, "RMS to target", 60000)
     assert tab.result is not None and tab.result.surface.sizes == (5, 5)
     # the ground truth and the result are both drawn (two control nets)
     assert "cp" in tab.truth_view.handles and "cp" in tab.result_view.handles
@@ -396,7 +416,7 @@ def test_clients_do_not_share_state(page, browser, studio):
     assert s1 is not s2
     field(p1, "Path in workdir").fill("cloud.ply")
     p1.get_by_role("button", name="Load cloud or mesh from workdir").click()
-    p1.get_by_text("loaded cloud.ply").wait_for(timeout=20000)
+    see(p1, "loaded cloud.ply", 20000)
     corner = s1.tabs["NURBS Generator"].obj.control_points[0, 0].clone()
     s2.tabs["NURBS Generator"].set_point((0, 0), (5.0, 5.0, 5.0))
     assert s1.tabs["Unsupervised"].points is not None and s2.tabs["Unsupervised"].points is None
@@ -409,13 +429,13 @@ def test_volume_tab(page):
     show_tab(page, "Volume from drawings")
     tab = page.session.tabs["Volume from drawings"]
     page.get_by_role("button", name="Use the paper's drawings").click()
-    page.get_by_text("the paper's drawings").wait_for(timeout=20000)
+    see(page, "the paper's drawings (front", 20000)
     set_number(page, "Control values per axis", 8)
     set_number(page, "Cost grid per axis", 12)
     set_number(page, "Iterations", 10)
     _wait(lambda: tab.iters.value == 10 and tab.control.value == 8, "the settings")
     page.get_by_role("button", name="Fit volume").click()
-    page.get_by_text("IoU front").wait_for(timeout=60000)
+    see(page, "IoU front", 60000)
     assert tab.fit is not None and not tab.fit.mesh.is_empty
     time.sleep(0.5)
     shot(page, "studio-volume.png")

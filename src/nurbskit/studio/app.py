@@ -362,9 +362,14 @@ class Session:
         camera = self.client.camera
         if camera._state.update_timestamp == 0.0:
             return  # the browser has not reported its camera yet (still connecting)
+        view = np.array([0.9, -1.2, 0.9])
+        right = np.cross(-view, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        # the panel covers the right of the page: aim right of the object so that it sits left
+        target = center + 0.3 * size * right
         # position first, then look_at: viser keeps the look-at point fixed that way
-        camera.position = center + size * np.array([0.9, -1.2, 0.9])
-        camera.look_at = center
+        camera.position = target + size * view
+        camera.look_at = target
 
     def log_exception(self, exc: BaseException) -> None:
         self.errors.append("".join(traceback.format_exception(exc)))

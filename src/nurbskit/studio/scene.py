@@ -191,7 +191,7 @@ class SplineView:
             self.handles["net"] = s.add_line_segments(f"{self.name}/net", net_segments(cp), NET_COLOR,
                                                       thickness=1.0, thickness_units="screen")
             self.handles["cp"] = s.add_point_cloud(f"{self.name}/cp", cp.reshape(-1, 3), NET_COLOR,
-                                                   point_size=0.012 * size, point_shape="circle")
+                                                   point_size=0.008 * size, point_shape="circle")
 
     def clear(self) -> None:
         for h in self.handles.values():
@@ -204,7 +204,7 @@ def draw_points(scene, name: str, points: np.ndarray, colors=None, size: float |
     """A point cloud ``(N, 3)``; ``colors`` one RGB or ``(N, 3)`` uint8."""
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     return scene.add_point_cloud(name, pts, CLOUD_COLOR if colors is None else colors,
-                                 point_size=size or 0.006 * diagonal(pts), point_shape="circle")
+                                 point_size=size or 0.004 * diagonal(pts), point_shape="circle")
 
 
 def draw_mesh(scene, name: str, vertices: np.ndarray, faces: np.ndarray, color=RESULT_COLOR):
