@@ -340,7 +340,7 @@ class Session:
                     # viser reports no tab switches: the 3-D view shows the tab last acted
                     # in, and this button brings a tab's objects back
                     show = client.gui.add_button("Show this tab in the 3-D view", color="gray")
-                    show.on_click(lambda event, label=spec.label: self.focus(label))
+                    show.on_click(lambda event, label=spec.label: self.show(label))
                     builder = spec.load_builder()
                     self.tabs[spec.label] = builder(self, client.gui)
         self.group = group
@@ -351,6 +351,21 @@ class Session:
             root = getattr(tab, "root", None)
             if root is not None:
                 root.visible = name == label
+
+    def show(self, label: str) -> None:
+        """Show tab ``label``'s objects and point the camera at them."""
+        self.focus(label)
+        tab = self.tabs[label]
+        try:
+            obj, mesh, _ = tab.shown()
+        except Exception:  # nothing to show yet
+            obj, mesh = None, None
+        if mesh is not None:
+            self.frame(mesh[0])
+        elif obj is not None:
+            self.frame(obj.control_points.detach().cpu().numpy()[..., :3])
+        elif getattr(tab, "points", None) is not None:
+            self.frame(tab.points)
 
     def frame(self, points) -> None:
         """Point the camera at ``points (N, 3)`` from a three-quarter view."""
