@@ -302,6 +302,9 @@ def test_bad_uploads_are_refused(page, area, name, content, expected):
         files=[{"name": name, "mimeType": "application/octet-stream", "buffer": content}])
     assert expected in error_text(page)
     assert tab.points is before, "a refused upload replaced the loaded points"
+    if len(content) > UPLOAD_LIMIT:  # dropped on its declared size: the bytes never reached the handler
+        time.sleep(1.0)
+        assert len(tab.loader.upload.value.content) <= UPLOAD_LIMIT
     outside_untouched(area)
 
 

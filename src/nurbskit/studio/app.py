@@ -27,7 +27,7 @@ import numpy as np
 from .._optional import require
 from ..errors import NurbskitError, OptionError
 from .registry import available_tabs, cad_writers
-from .workdir import Workdir, check_upload
+from .workdir import Workdir, check_upload, too_large
 
 DEFAULT_MAX_UPLOAD = 200 * 1024 * 1024
 PROGRESS_INTERVAL = 0.1  # seconds between progress redraws (10 per second at most)
@@ -96,6 +96,7 @@ class Loader:
         self.load = ui.add_button(f"{label} from workdir")
         self.refresh = ui.add_button("Refresh file list")
         self.upload.on_upload(lambda event: self._guard(self._from_upload))
+        session.upload_status[self.upload._impl.uuid] = status
         self.load.on_click(lambda event: self._guard(self._from_workdir))
         self.refresh.on_click(lambda event: self._refresh())
         self.choice.on_update(lambda event: self._choose())
@@ -332,6 +333,8 @@ class Session:
         self.options, self.workdir = studio.options, studio.workdir
         self.tabs: dict[str, object] = {}
         self.errors: list[str] = []
+        self.upload_status: dict[str, Status] = {}  # upload button uuid -> its tab's status
+        self._refuse_large_uploads()
         client.scene.set_up_direction("+z")
         with client.gui.add_folder("nurbskit studio", expand_by_default=True):
             group = client.gui.add_tab_group()
@@ -351,6 +354,31 @@ class Session:
             root = getattr(tab, "root", None)
             if root is not None:
                 root.visible = name == label
+
+    def _refuse_large_uploads(self) -> None:
+        """Drop an upload whose declared size is over the limit before its bytes arrive.
+
+        viser buffers an upload in memory until it is complete; this handler runs after
+        viser's own handler of the transfer's first message and forgets the transfer, so
+        the remaining parts are discarded as they come. (Uses viser's upload table; if
+        that ever changes, the size check after the upload still refuses the file.)
+        """
+        from viser import _messages
+
+        gui = self.client.gui
+        limit = self.options.max_upload_bytes
+
+        def check(client_id, message) -> None:
+            if message.size_bytes <= limit:
+                return
+            states = getattr(gui, "_current_file_upload_states", None)
+            if isinstance(states, dict):
+                states.pop(message.transfer_uuid, None)
+            status = self.upload_status.get(message.source_component_uuid)
+            if status is not None:
+                status.error(too_large(message.filename, message.size_bytes, limit))
+
+        gui._websock_interface.register_handler(_messages.FileTransferStartUpload, check)
 
     def show(self, label: str) -> None:
         """Show tab ``label``'s objects and point the camera at them."""

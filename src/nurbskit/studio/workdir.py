@@ -108,12 +108,15 @@ class Workdir:
         return path
 
 
+def too_large(name: str, size: int, limit: int) -> str:
+    """The message for an upload of ``size`` bytes over ``limit``."""
+    return (f"upload {Path(str(name).replace(chr(92), '/')).name!r} is {size:,} bytes; the studio accepts at most "
+            f"{limit:,} (nurbskit studio --max-upload-mb)")
+
+
 def check_upload(name: str, content: bytes, limit: int) -> None:
     """Refuse an upload larger than ``limit`` bytes, or an empty one (an InputError)."""
     if len(content) > limit:
-        raise InputError(
-            f"upload {Path(str(name)).name!r} is {len(content):,} bytes; the studio accepts at most {limit:,} "
-            "(nurbskit studio --max-upload-mb)"
-        )
+        raise InputError(too_large(name, len(content), limit))
     if not content:
         raise InputError(f"upload {Path(str(name)).name!r} is empty")
