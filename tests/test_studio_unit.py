@@ -200,3 +200,20 @@ def test_command_serves_the_page(tmp_path):
             proc.kill()
             raise
     assert proc.returncode == 130 and "Traceback" not in rest
+
+
+def test_loss_weights_and_iterations_from_the_panel():
+    from nurbskit.fit.pipelines import get_pipeline
+    from nurbskit.studio.tabs import _apply_iterations, _apply_loss_weights
+
+    cfg = _apply_loss_weights(get_pipeline("UCDL"), "chamfer=2, laplacian=0.5")
+    assert all(s.loss.chamfer == 2.0 and s.loss.laplacian == 0.5 for s in cfg.stages)
+    assert _apply_loss_weights(get_pipeline("UCDL"), "  ").stages == get_pipeline("UCDL").stages
+    for bad, words in (("laplace=1", "expected name=value"), ("chamfer=x", "needs a number"),
+                       ("chamfer=-1", ">= 0"), ("laplacian_on=1", "expected name=value")):
+        with pytest.raises(OptionError, match=words):
+            _apply_loss_weights(get_pipeline("UCDL"), bad)
+    sb = get_pipeline("SB")
+    scaled = _apply_iterations(sb, 40)
+    assert sum(s.iters for s in scaled.stages) == 40 and len(scaled.stages) == len(sb.stages)
+    assert _apply_iterations(sb, 0).stages == sb.stages

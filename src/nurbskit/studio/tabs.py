@@ -39,6 +39,29 @@ def _apply_iterations(cfg, iterations: int):
     return dataclasses.replace(cfg, stages=stages)
 
 
+def _apply_loss_weights(cfg, text: str):
+    """Set loss weights of every stage from ``"chamfer=1 laplacian=0.001"`` (blank: keep)."""
+    from ..fit.config import LossWeights
+
+    text = text.strip()
+    if not text:
+        return cfg
+    names = {f.name for f in dataclasses.fields(LossWeights) if f.type in ("float", float)}
+    changes = {}
+    for item in text.replace(",", " ").split():
+        key, sep, value = item.partition("=")
+        if not sep or key not in names:
+            raise OptionError(f"loss weights: expected name=value with names {', '.join(sorted(names))}; got {item!r}")
+        try:
+            changes[key] = float(value)
+        except ValueError:
+            raise OptionError(f"loss weights: {key} needs a number, got {value!r}") from None
+        if not changes[key] >= 0:
+            raise OptionError(f"loss weights: {key} must be >= 0, got {value}")
+    stages = [dataclasses.replace(s, loss=dataclasses.replace(s.loss, **changes)) for s in cfg.stages]
+    return dataclasses.replace(cfg, stages=stages)
+
+
 def _metrics_markdown(report: dict) -> str:
     m, mn = report.get("metrics", {}), report.get("metrics_normalized", {})
     rows = [
@@ -79,6 +102,7 @@ class UnsupervisedTab:
         self.ctrl = ui.add_vector2("Control grid", (15, 15), min=(2, 2), max=(64, 64), step=1)
         self.degree = ui.add_vector2("Degree", (3, 3), min=(1, 1), max=(7, 7), step=1)
         self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
+        self.weights = ui.add_text("Loss weights (e.g. chamfer=1 laplacian=0.001; blank: the pipeline's)", "")
         self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
         self.show_error = ui.add_checkbox("Colour points by error", True)
         self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit")
@@ -123,6 +147,7 @@ class UnsupervisedTab:
         cfg = get_pipeline(self.pipeline.value)
         cfg = dataclasses.replace(cfg, ctrl=tuple(int(x) for x in self.ctrl.value),
                                   degree=tuple(int(x) for x in self.degree.value), device=self.device.value)
+        cfg = _apply_loss_weights(cfg, self.weights.value)
         return _apply_iterations(cfg, int(self.iters.value)).validate()
 
     def _fit(self, progress, stop):
