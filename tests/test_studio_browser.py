@@ -158,6 +158,13 @@ def set_number(page, label: str, value) -> None:
     box.press("Enter")
 
 
+def upload(page, button: str, files) -> None:
+    """Click an upload button and answer the browser's file chooser with ``files``."""
+    with page.expect_file_chooser(timeout=20000) as chooser:
+        page.get_by_role("button", name=button).click()
+    chooser.value.set_files(files)
+
+
 def viewport_pixels(page) -> np.ndarray:
     """The 3-D viewport (the canvas left of the panel) as an RGB array."""
     from PIL import Image
@@ -282,8 +289,8 @@ def test_mesh_upload_is_poisson_sampled(page, area):
     box.export(buffer, file_type="obj")
     set_number(page, "Poisson samples", 300)
     _wait(lambda: tab.count.value == 300, "the sample count")
-    page.locator("input[type=file]").set_input_files(
-        files=[{"name": "ball.obj", "mimeType": "text/plain", "buffer": buffer.getvalue()}])
+    upload(page, "Load cloud or mesh: upload a file",
+           [{"name": "ball.obj", "mimeType": "text/plain", "buffer": buffer.getvalue()}])
     see(page, "300 Poisson samples", 20000)
     r = np.linalg.norm(tab.points, axis=1)
     assert tab.points.shape == (300, 3) and r.max() <= 1.0 + 1e-9 and r.min() > 0.9
@@ -298,8 +305,8 @@ def test_mesh_upload_is_poisson_sampled(page, area):
 def test_bad_uploads_are_refused(page, area, name, content, expected):
     tab = page.session.tabs["Unsupervised"]
     before = tab.points
-    page.locator("input[type=file]").set_input_files(
-        files=[{"name": name, "mimeType": "application/octet-stream", "buffer": content}])
+    upload(page, "Load cloud or mesh: upload a file",
+           [{"name": name, "mimeType": "application/octet-stream", "buffer": content}])
     assert expected in error_text(page)
     assert tab.points is before, "a refused upload replaced the loaded points"
     if len(content) > UPLOAD_LIMIT:  # dropped on its declared size: the bytes never reached the handler
@@ -410,6 +417,28 @@ def test_supervised_fit_side_by_side(page, area):
     # the ground truth and the result are both drawn (two control nets)
     assert "cp" in tab.truth_view.handles and "cp" in tab.result_view.handles
     shot(page, "studio-supervised.png")
+
+
+def test_supervised_ctrlpts_and_weights_upload(page, tmp_path):
+    """The thesis's .ctrlpts + .weights pair, uploaded (no sibling files on the server)."""
+    import nurbskit
+
+    show_tab(page, "Supervised")
+    tab = page.session.tabs["Supervised"]
+    g = torch.stack(torch.meshgrid(torch.linspace(0, 1, 5), torch.linspace(0, 1, 4), indexing="ij"), -1)
+    cp = torch.cat([g, (g[..., :1] * g[..., 1:]) ** 2], -1).double()
+    w = 1.0 + torch.rand(5, 4, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    surface = nurbskit.NURBSSurface(cp, (3, 2), weights=w)
+    nurbskit.io.write_nurbs(tmp_path / "duck.ctrlpts", surface)
+    field(page, "Sizes of a .ctrlpts grid").fill("5 4")
+    field(page, "Degrees of a .ctrlpts grid").fill("3 2")
+    _wait(lambda: tab.sizes.value == "5 4" and tab.degrees.value == "3 2", "the sizes and degrees")
+    upload(page, "Upload .weights", str(tmp_path / "duck.weights"))
+    see(page, "20 weights", 20000)
+    upload(page, "Load NURBS: upload a file", str(tmp_path / "duck.ctrlpts"))
+    see(page, "loaded duck.ctrlpts", 20000)
+    assert_close(tab.target.weights, w, atol=1e-12)
+    assert_close(tab.target.control_points, cp, atol=1e-12)
 
 
 def test_clients_do_not_share_state(page, browser, studio):

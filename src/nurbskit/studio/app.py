@@ -374,6 +374,10 @@ class Session:
             states = getattr(gui, "_current_file_upload_states", None)
             if isinstance(states, dict):
                 states.pop(message.transfer_uuid, None)
+            # tell the page the transfer is over, so that its upload button comes back
+            gui._websock_interface.queue_message(_messages.FileTransferPartAck(
+                source_component_uuid=message.source_component_uuid, transfer_uuid=message.transfer_uuid,
+                transferred_bytes=message.size_bytes, total_bytes=message.size_bytes))
             status = self.upload_status.get(message.source_component_uuid)
             if status is not None:
                 status.error(too_large(message.filename, message.size_bytes, limit))

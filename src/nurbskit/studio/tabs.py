@@ -212,6 +212,10 @@ class SupervisedTab:
                         "a `.weights` file beside one in the workdir is read with it.")
         self.sizes = ui.add_text("Sizes of a .ctrlpts grid", "")
         self.degrees = ui.add_text("Degrees of a .ctrlpts grid", "3 3")
+        self.weights = None  # from an uploaded .weights file, for the next uploaded .ctrlpts
+        self.weights_upload = ui.add_upload_button("Upload .weights (for an uploaded .ctrlpts)")
+        self.weights_upload.on_upload(lambda event: self.loader._guard(self._weights_uploaded))
+        session.upload_status[self.weights_upload._impl.uuid] = self.status
         self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load NURBS")
         names = tuple(k for k, p in PIPELINES.items() if p.supervised)
         self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="SC" if "SC" in names else names[0])
@@ -224,10 +228,29 @@ class SupervisedTab:
         self.truth_view = SplineView(scene, "/supervised/truth", SURFACE_COLOR)
         self.result_view = SplineView(scene, "/supervised/result", RESULT_COLOR)
 
+    def _weights_uploaded(self) -> None:
+        import nurbskit
+        from .workdir import check_upload
+
+        file = self.weights_upload.value
+        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
+        tmp = self.session.workdir.scratch(".weights")
+        try:
+            tmp.write_bytes(file.content)
+            try:
+                self.weights = np.asarray(nurbskit.io.read_weights(tmp), dtype=np.float64)
+            except Exception as exc:  # noqa: BLE001
+                raise InputError(str(exc).replace(str(tmp), Path(file.name).name)) from None
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.status.info(f"{Path(file.name).name}: {self.weights.size} weights, used by the next .ctrlpts upload")
+
     def _read(self, path: Path, name: str):
         import nurbskit
 
         options = {}
+        if Path(name).suffix.lower() == ".ctrlpts" and self.weights is not None and ".studio" in path.parts:
+            options["weights"] = self.weights  # an upload has no sibling .weights file
         if Path(name).suffix.lower() in (".ctrlpts", ".cptw"):
             if self.sizes.value.strip():
                 options["sizes"] = [int(x) for x in self.sizes.value.replace(",", " ").split()]
