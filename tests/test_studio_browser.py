@@ -17,7 +17,6 @@ Without viser, Playwright or Chromium these tests skip, and they fail when
 from __future__ import annotations
 
 import io
-import json
 import os
 import shutil
 import time
