@@ -217,3 +217,12 @@ def test_loss_weights_and_iterations_from_the_panel():
     scaled = _apply_iterations(sb, 40)
     assert sum(s.iters for s in scaled.stages) == 40 and len(scaled.stages) == len(sb.stages)
     assert _apply_iterations(sb, 0).stages == sb.stages
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("127.0.0.2", True), ("localhost", True),
+                                            ("::1", True), ("0.0.0.0", False), ("192.168.1.5", False),
+                                            ("example.org", False), ("::", False)])
+def test_only_loopback_hosts_go_without_a_warning(host, loopback):
+    from nurbskit.cli.studio_command import is_loopback
+
+    assert is_loopback(host) is loopback

@@ -18,7 +18,18 @@ from pathlib import Path
 
 from ..errors import OptionError
 
-LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def is_loopback(host: str) -> bool:
+    """True for addresses only this machine reaches (127.0.0.0/8, ::1, localhost)."""
+    import ipaddress
+
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 def _port(text: str) -> int:
@@ -66,7 +77,7 @@ def run(args) -> int:
     require("viser", "studio", "nurbskit studio")
     from ..studio.app import Studio, StudioOptions
 
-    if args.host not in LOOPBACK:
+    if not is_loopback(args.host):
         sys.stderr.write(
             f"nurbskit studio: warning: binding {args.host}: anyone who can reach this machine can use the "
             f"studio and the files in {workdir.resolve()}\n"
