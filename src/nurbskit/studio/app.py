@@ -148,8 +148,9 @@ class RunPanel:
         self.bar = ui.add_progress_bar(0.0)
         self.curve = ui.add_uplot(
             (np.zeros(1), np.zeros(1)),
-            (uplot.Series(label="iteration"), uplot.Series(label="loss", stroke="#1c7ed6", width=2)),
-            title="Loss", scales={"x": {"time": False}, "y": {"distr": 3}}, aspect=1.6,
+            (uplot.Series(label="iteration"), uplot.Series(label="log10 loss", stroke="#1c7ed6", width=2)),
+            # log10 on a linear axis: uPlot's log axis labels small losses "0"
+            title="Loss (log10)", scales={"x": {"time": False}}, aspect=1.6,
         )
         self.clock = ui.add_markdown("")
         self.metrics = ui.add_markdown("")
@@ -227,7 +228,7 @@ class RunPanel:
         self.bar.value = float(min(100.0, max(0.0, 100.0 * fraction)))
         if self.losses:
             y = np.asarray(self.losses, dtype=np.float64)
-            self.curve.data = (np.arange(1, y.size + 1, dtype=np.float64), np.maximum(y, 1e-300))
+            self.curve.data = (np.arange(1, y.size + 1, dtype=np.float64), np.log10(np.maximum(y, 1e-300)))
 
 
 EXPORT_FORMATS = {
