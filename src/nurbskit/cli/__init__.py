@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.io_commands",
     "nurbskit.cli.fit_command",
     "nurbskit.cli.volume_command",
+    "nurbskit.cli.studio_command",
 )
 
 EXIT_BUG = 1

@@ -1,0 +1,476 @@
+"""The studio server: one viser server, one :class:`Session` per browser tab.
+
+Each connected client gets its own GUI (``client.gui``) and its own scene
+(``client.scene``), built by the tab builders of :mod:`.registry`, and its own
+:class:`Session` holding what it loaded and fitted: two browser tabs never share
+state. Long work (fits) runs on a worker thread per tab, reports progress through the
+library's callbacks and can be stopped; an exception is shown in the page and the
+server carries on.
+
+The widgets every tab shares (:class:`Loader`, :class:`RunPanel`, :class:`ExportPanel`,
+:class:`Status`) live here; the tabs only wire them to the library's public API.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._optional import require
+from ..errors import NurbskitError, OptionError
+from .registry import available_tabs, cad_writers
+from .workdir import Workdir, check_upload, too_large
+
+DEFAULT_MAX_UPLOAD = 200 * 1024 * 1024
+PROGRESS_INTERVAL = 0.1  # seconds between progress redraws (10 per second at most)
+HEARTBEAT = 0.25  # seconds between "still running" lines while no iteration reports
+
+
+class Stopped(Exception):
+    """Raised inside a progress callback when the user pressed Stop."""
+
+
+@dataclass
+class StudioOptions:
+    """What the command line sets."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    workdir: Path = field(default_factory=Path.cwd)
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD
+
+
+# ---- widgets shared by every tab ---------------------------------------------------------
+
+class Status:
+    """One line of status per tab: information, or an error shown in red (and as a toast)."""
+
+    def __init__(self, session: "Session", ui):
+        self.session = session
+        self.handle = ui.add_html("<div></div>")
+
+    def info(self, text: str) -> None:
+        self.handle.content = f"<div class='studio-status'>{html.escape(text)}</div>"
+
+    def error(self, text: str) -> None:
+        self.handle.content = (
+            f"<div class='studio-error' style='color:#c92a2a'><b>Error:</b> {html.escape(text)}</div>"
+        )
+        try:
+            self.session.client.add_notification("Error", text, color="red", auto_close_seconds=8.0)
+        except Exception:  # a closed browser tab: nothing to show it in
+            pass
+
+
+def describe_error(exc: BaseException) -> str:
+    """The message people see: a NurbskitError's own words, else type and message."""
+    if isinstance(exc, NurbskitError):
+        return str(exc)
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or exc}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+class Loader:
+    """Upload a file, or pick one from the workdir; ``read(path)`` turns it into data.
+
+    The upload is size-checked, written under the workdir's scratch folder with a
+    made-up name, read by ``read`` (nurbskit's readers: the content decides), and the
+    scratch file is deleted whatever happens.
+    """
+
+    def __init__(self, session: "Session", ui, status: Status, read: Callable[[Path, str], object],
+                 on_loaded: Callable[[object, str], None], label: str = "Load"):
+        self.session, self.status, self.read, self.on_loaded = session, status, read, on_loaded
+        self.upload = ui.add_upload_button(f"{label}: upload a file", icon=None)
+        self.choice = ui.add_dropdown("Workdir file", self._options(), initial_value="")
+        self.path = ui.add_text("Path in workdir", "")
+        self.load = ui.add_button(f"{label} from workdir")
+        self.refresh = ui.add_button("Refresh file list")
+        self.upload.on_upload(lambda event: self._guard(self._from_upload))
+        session.upload_status[self.upload._impl.uuid] = status
+        self.load.on_click(lambda event: self._guard(self._from_workdir))
+        self.refresh.on_click(lambda event: self._refresh())
+        self.choice.on_update(lambda event: self._choose())
+
+    def _options(self) -> tuple[str, ...]:
+        return ("",) + tuple(self.session.workdir.files())
+
+    def _refresh(self) -> None:
+        self.choice.options = self._options()
+
+    def _choose(self) -> None:
+        if self.choice.value:
+            self.path.value = self.choice.value
+
+    def _guard(self, fn) -> None:
+        try:
+            fn()
+        except Exception as exc:  # shown in the page; the server carries on
+            self.status.error(describe_error(exc))
+
+    def _from_upload(self) -> None:
+        file = self.upload.value
+        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
+        tmp = self.session.workdir.scratch(file.name)
+        try:
+            tmp.write_bytes(file.content)
+            data = self.read(tmp, Path(file.name).name)
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.on_loaded(data, Path(file.name).name)
+
+    def _from_workdir(self) -> None:
+        name = self.path.value or self.choice.value
+        path = self.session.workdir.resolve(name)
+        data = self.read(path, name)
+        self.on_loaded(data, name)
+
+
+class RunPanel:
+    """Run / Stop buttons, a progress bar, a loss curve and the metrics of the last run."""
+
+    def __init__(self, session: "Session", ui, status: Status, start: Callable[[Callable, threading.Event], object],
+                 done: Callable[[object], None], label: str = "Run"):
+        from viser import uplot
+
+        self.session, self.status, self.start, self.done = session, status, start, done
+        self.run = ui.add_button(label)
+        self.stop = ui.add_button("Stop", disabled=True)
+        self.bar = ui.add_progress_bar(0.0)
+        self.curve = ui.add_uplot(
+            (np.zeros(1), np.zeros(1)),
+            (uplot.Series(label="iteration"), uplot.Series(label="log10 loss", stroke="#1c7ed6", width=2)),
+            # log10 on a linear axis: uPlot's log axis labels small losses "0"
+            title="Loss (log10)", scales={"x": {"time": False}}, aspect=1.6,
+        )
+        self.clock = ui.add_markdown("")
+        self.metrics = ui.add_markdown("")
+        self.thread: threading.Thread | None = None
+        self.heartbeats = 0
+        self._fraction = 0.0
+        self.stop_event = threading.Event()
+        self.updates = 0
+        self.losses: list[float] = []
+        self.run.on_click(lambda event: self.launch())
+        self.stop.on_click(lambda event: self.stop_event.set())
+
+    @property
+    def running(self) -> bool:
+        return self.thread is not None and self.thread.is_alive()
+
+    def launch(self) -> None:
+        if self.running:
+            self.status.error("a run is already in progress; stop it first")
+            return
+        self.stop_event = threading.Event()
+        self.losses, self.updates = [], 0
+        self.bar.value, self.bar.animated = 0.0, True
+        self.run.disabled, self.stop.disabled = True, False
+        self.metrics.content = ""
+        self.status.info("running ...")
+        self.thread = threading.Thread(target=self._work, name="nurbskit-studio-run", daemon=True)
+        self.thread.start()
+        threading.Thread(target=self._beat, args=(self.thread,), name="nurbskit-studio-clock", daemon=True).start()
+
+    def _beat(self, worker: threading.Thread) -> None:
+        """Elapsed time and iteration count, a few times a second, for as long as the run lasts.
+
+        Some phases report no iterations (the initial surface, the least-squares
+        alternation, the final report); the page still shows that work goes on.
+        """
+        t0 = time.perf_counter()
+        while worker.is_alive():
+            worker.join(HEARTBEAT)
+            if worker.is_alive():
+                self.heartbeats += 1
+                self.clock.content = (f"running for {time.perf_counter() - t0:.1f} s; "
+                                      f"{len(self.losses)} iterations, {100 * self._fraction:.0f} %")
+        self.clock.content = f"last run: {time.perf_counter() - t0:.1f} s, {len(self.losses)} iterations"
+
+    def _work(self) -> None:
+        last = [0.0]
+
+        def progress(fraction: float, loss: float | None = None) -> None:
+            if self.stop_event.is_set():
+                raise Stopped()
+            if loss is not None and np.isfinite(loss):
+                self.losses.append(float(loss))
+            now = time.perf_counter()
+            if now - last[0] >= PROGRESS_INTERVAL or fraction >= 1.0:
+                last[0] = now
+                self._show_progress(fraction)
+
+        try:
+            result = self.start(progress, self.stop_event)
+            self._show_progress(1.0)
+            self.done(result)
+        except Stopped:
+            self.status.info("stopped; nothing was kept from the interrupted run")
+        except Exception as exc:  # the page says what failed; the server keeps serving
+            self.status.error(describe_error(exc))
+            self.session.log_exception(exc)
+        finally:
+            self.bar.animated = False
+            self.run.disabled, self.stop.disabled = False, True
+
+    def _show_progress(self, fraction: float) -> None:
+        self.updates += 1
+        self._fraction = fraction
+        self.bar.value = float(min(100.0, max(0.0, 100.0 * fraction)))
+        if self.losses:
+            y = np.asarray(self.losses, dtype=np.float64)
+            self.curve.data = (np.arange(1, y.size + 1, dtype=np.float64), np.log10(np.maximum(y, 1e-300)))
+
+
+EXPORT_FORMATS = {
+    "nurbskit JSON": ".json",
+    "geomdl JSON": ".geomdl.json",
+    "Rhino .3dm": ".3dm",
+    "OBJ mesh": ".obj",
+    "PLY mesh": ".ply",
+}
+
+
+class ExportPanel:
+    """Download what the tab shows (NURBS files, meshes, CAD once available) or a screenshot.
+
+    ``shown()`` returns ``(nurbs or None, (vertices, faces) or None, stem)``.
+    """
+
+    def __init__(self, session: "Session", ui, status: Status, shown: Callable[[], tuple]):
+        self.session, self.status, self.shown = session, status, shown
+        self.cad = cad_writers()
+        formats = tuple(EXPORT_FORMATS) + tuple(self.cad)
+        self.format = ui.add_dropdown("Export format", formats, initial_value=formats[0])
+        self.download = ui.add_button("Download")
+        self.save_name = ui.add_text("Save as (in workdir)", "")
+        self.save = ui.add_button("Save to workdir")
+        self.screenshot = ui.add_button("Screenshot")
+        self.download.on_click(lambda event: self._guard(self._download))
+        self.save.on_click(lambda event: self._guard(self._save))
+        self.screenshot.on_click(lambda event: self._guard(self._screenshot))
+
+    def _guard(self, fn) -> None:
+        try:
+            fn()
+        except Exception as exc:
+            self.status.error(describe_error(exc))
+
+    def write(self, path: Path) -> None:
+        """Write what is shown to ``path`` in the chosen format."""
+        import nurbskit
+
+        obj, mesh, _ = self.shown()
+        fmt = self.format.value
+        if fmt in ("OBJ mesh", "PLY mesh"):
+            if mesh is None:
+                if obj is None or obj.para_dim != 2:
+                    raise OptionError("nothing to export as a mesh yet")
+                t = nurbskit.tessellate(obj.detach().to(dtype=__import__("torch").float64), (64, 64))
+                mesh = (t.vertices.numpy(), t.faces.numpy())
+            nurbskit.io.write_mesh(path, mesh[0], mesh[1])
+            return
+        if obj is None:
+            raise OptionError("nothing to export as NURBS yet; load, fit or create an object first")
+        obj = obj.detach()
+        if fmt in self.cad:
+            self.cad[fmt][1](path, obj)
+        elif fmt == "geomdl JSON":
+            nurbskit.io.write_nurbs(path, obj, format="geomdl")
+        else:
+            nurbskit.io.write_nurbs(path, obj)
+
+    def extension(self) -> str:
+        fmt = self.format.value
+        return self.cad[fmt][0] if fmt in self.cad else EXPORT_FORMATS[fmt]
+
+    def _download(self) -> None:
+        _, _, stem = self.shown()
+        ext = self.extension()
+        tmp = self.session.workdir.scratch(f"export{ext}", kind="exports")
+        try:
+            try:
+                self.write(tmp)
+            except Exception as exc:  # name the download, not the scratch file
+                raise type(exc)(str(exc).replace(str(tmp), f"{stem}{ext}")) from None
+            content = tmp.read_bytes()
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.session.client.send_file_download(f"{stem}{ext}", content, save_immediately=True)
+        self.status.info(f"downloaded {stem}{ext} ({len(content):,} bytes)")
+
+    def _save(self) -> None:
+        name = self.save_name.value.strip()
+        path = self.session.workdir.output_name(name)
+        self.write(path)
+        self.status.info(f"saved {name}")
+
+    def _screenshot(self) -> None:
+        from PIL import Image
+
+        image = self.session.client.get_render(720, 1280, transport_format="png", timeout=20.0)
+        buffer = io.BytesIO()
+        Image.fromarray(image).save(buffer, format="PNG")
+        self.session.client.send_file_download("nurbskit-studio.png", buffer.getvalue(), save_immediately=True)
+        self.status.info("screenshot downloaded")
+
+
+# ---- one browser tab ---------------------------------------------------------------------
+
+class Session:
+    """Everything one browser tab (viser client) has: its GUI, scene and data."""
+
+    def __init__(self, studio: "Studio", client):
+        self.studio, self.client = studio, client
+        self.options, self.workdir = studio.options, studio.workdir
+        self.tabs: dict[str, object] = {}
+        self.errors: list[str] = []
+        self.upload_status: dict[str, Status] = {}  # upload button uuid -> its tab's status
+        self._refuse_large_uploads()
+        client.scene.set_up_direction("+z")
+        with client.gui.add_folder("nurbskit studio", expand_by_default=True):
+            group = client.gui.add_tab_group()
+            for spec in studio.tabs:
+                with group.add_tab(spec.label):
+                    # viser reports no tab switches: the 3-D view shows the tab last acted
+                    # in, and this button brings a tab's objects back
+                    show = client.gui.add_button("Show this tab in the 3-D view", color="gray")
+                    show.on_click(lambda event, label=spec.label: self.show(label))
+                    builder = spec.load_builder()
+                    self.tabs[spec.label] = builder(self, client.gui)
+        self.group = group
+
+    def focus(self, label: str) -> None:
+        """Show the scene of tab ``label`` only."""
+        for name, tab in self.tabs.items():
+            root = getattr(tab, "root", None)
+            if root is not None:
+                root.visible = name == label
+
+    def _refuse_large_uploads(self) -> None:
+        """Drop an upload whose declared size is over the limit before its bytes arrive.
+
+        viser buffers an upload in memory until it is complete; this handler runs after
+        viser's own handler of the transfer's first message and forgets the transfer, so
+        the remaining parts are discarded as they come. (Uses viser's upload table; if
+        that ever changes, the size check after the upload still refuses the file.)
+        """
+        from viser import _messages
+
+        gui = self.client.gui
+        limit = self.options.max_upload_bytes
+
+        def check(client_id, message) -> None:
+            if message.size_bytes <= limit:
+                return
+            states = getattr(gui, "_current_file_upload_states", None)
+            if isinstance(states, dict):
+                states.pop(message.transfer_uuid, None)
+            # tell the page the transfer is over, so that its upload button comes back
+            gui._websock_interface.queue_message(_messages.FileTransferPartAck(
+                source_component_uuid=message.source_component_uuid, transfer_uuid=message.transfer_uuid,
+                transferred_bytes=message.size_bytes, total_bytes=message.size_bytes))
+            status = self.upload_status.get(message.source_component_uuid)
+            if status is not None:
+                status.error(too_large(message.filename, message.size_bytes, limit))
+
+        gui._websock_interface.register_handler(_messages.FileTransferStartUpload, check)
+
+    def show(self, label: str) -> None:
+        """Show tab ``label``'s objects and point the camera at them."""
+        self.focus(label)
+        tab = self.tabs[label]
+        try:
+            obj, mesh, _ = tab.shown()
+        except Exception:  # nothing to show yet
+            obj, mesh = None, None
+        if mesh is not None:
+            self.frame(mesh[0])
+        elif obj is not None:
+            self.frame(obj.control_points.detach().cpu().numpy()[..., :3])
+        elif getattr(tab, "points", None) is not None:
+            self.frame(tab.points)
+
+    def frame(self, points) -> None:
+        """Point the camera at ``points (N, 3)`` from a three-quarter view."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts.size == 0 or not np.isfinite(pts).all():
+            return
+        lo, hi = pts.min(0), pts.max(0)
+        center, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
+        camera = self.client.camera
+        if camera._state.update_timestamp == 0.0:
+            return  # the browser has not reported its camera yet (still connecting)
+        view = np.array([0.9, -1.2, 0.9])
+        right = np.cross(-view, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        # the panel covers the right of the page: aim right of the object so that it sits left
+        target = center + 0.3 * size * right
+        # position first, then look_at: viser keeps the look-at point fixed that way
+        camera.position = target + size * view
+        camera.look_at = target
+
+    def log_exception(self, exc: BaseException) -> None:
+        self.errors.append("".join(traceback.format_exception(exc)))
+
+
+class Studio:
+    """The server. ``Studio(options).start()``; ``url``; ``stop()``."""
+
+    def __init__(self, options: StudioOptions):
+        self.options = options
+        self.workdir = Workdir(options.workdir)
+        self.tabs = available_tabs()
+        self.sessions: dict[int, Session] = {}
+        self.server = None
+        self._lock = threading.Lock()
+
+    def start(self) -> "Studio":
+        viser = require("viser", "studio", "nurbskit studio")
+        self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
+        self.server.gui.configure_theme(control_width="large", show_share_button=False)
+        # No HDRI environment (a texture download the machine may not reach, and slow in
+        # software WebGL) and no shadow maps: the default lights shade the surfaces.
+        self.server.scene.configure_environment_map(None)
+        self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+        return self
+
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        host = self.options.host
+        shown = f"[{host}]" if ":" in host else host
+        return f"http://{shown}:{self.port}/"
+
+    def _connect(self, client) -> None:
+        session = Session(self, client)
+        with self._lock:
+            self.sessions[client.client_id] = session
+
+    def _disconnect(self, client) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            for tab in session.tabs.values():
+                panel = getattr(tab, "runner", None)
+                if panel is not None:
+                    panel.stop_event.set()
+
+    def stop(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None

@@ -1,0 +1,404 @@
+"""The fitting tabs: Unsupervised, Supervised and Volume from drawings.
+
+Each tab is a thin layer over the library's public API: it reads with
+``nurbskit.io``, samples meshes with ``nurbskit.sample_mesh``, fits with
+``nurbskit.fit_surface`` / ``nurbskit.fit_silhouettes``, reports with
+``nurbskit.fit.fit_report``, and draws with :mod:`.scene`. The widgets (loader, run
+panel, export) are the shared ones of :mod:`.app`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import InputError, OptionError
+from .app import ExportPanel, Loader, RunPanel, Status
+from .scene import RESULT_COLOR, SURFACE_COLOR, SplineView, colormap, diagonal, draw_mesh, draw_points
+
+
+def _devices() -> tuple[str, ...]:
+    return ("cpu", "cuda") if torch.cuda.is_available() else ("cpu",)
+
+
+def _apply_iterations(cfg, iterations: int):
+    """Scale the stages' iteration counts so that they add up to ``iterations`` (0: keep)."""
+    total = cfg.total_iters
+    if iterations <= 0 or total <= 0:
+        return cfg
+    stages = []
+    left = iterations
+    for i, s in enumerate(cfg.stages):
+        n = left if i == len(cfg.stages) - 1 else max(1, round(iterations * s.iters / total))
+        n = max(0, min(n, left))
+        left -= n
+        stages.append(dataclasses.replace(s, iters=n))
+    return dataclasses.replace(cfg, stages=stages)
+
+
+def _apply_loss_weights(cfg, text: str):
+    """Set loss weights of every stage from ``"chamfer=1 laplacian=0.001"`` (blank: keep)."""
+    from ..fit.config import LossWeights
+
+    text = text.strip()
+    if not text:
+        return cfg
+    names = {f.name for f in dataclasses.fields(LossWeights) if f.type in ("float", float)}
+    changes = {}
+    for item in text.replace(",", " ").split():
+        key, sep, value = item.partition("=")
+        if not sep or key not in names:
+            raise OptionError(f"loss weights: expected name=value with names {', '.join(sorted(names))}; got {item!r}")
+        try:
+            changes[key] = float(value)
+        except ValueError:
+            raise OptionError(f"loss weights: {key} needs a number, got {value!r}") from None
+        if not changes[key] >= 0:
+            raise OptionError(f"loss weights: {key} must be >= 0, got {value}")
+    stages = [dataclasses.replace(s, loss=dataclasses.replace(s.loss, **changes)) for s in cfg.stages]
+    return dataclasses.replace(cfg, stages=stages)
+
+
+def _metrics_markdown(report: dict) -> str:
+    m, mn = report.get("metrics", {}), report.get("metrics_normalized", {})
+    rows = [
+        ("pipeline", report.get("pipeline")),
+        ("iterations", report.get("iterations")),
+        ("seconds", f"{report.get('seconds', 0.0):.2f}"),
+        ("Chamfer", f"{m.get('chamfer', float('nan')):.4g} ({mn.get('chamfer', float('nan')):.3g} of diag.)"),
+        ("Hausdorff", f"{m.get('hausdorff', float('nan')):.4g} ({mn.get('hausdorff', float('nan')):.3g} of diag.)"),
+        ("Laplacian", f"{m.get('laplacian', float('nan')):.4g}"),
+        ("combined (CD + HD + 0.1 LD)", f"{mn.get('combined', float('nan')):.4g}"),
+    ]
+    if "rms" in report:
+        rows.append(("RMS to target", f"{report['rms']:.4g}"))
+    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
+    return "**Metrics**\n\n| | |\n|---|---|\n" + body
+
+
+# ---- Unsupervised -----------------------------------------------------------------------
+
+class UnsupervisedTab:
+    """Load a cloud or mesh, choose a pipeline, fit, look at the result."""
+
+    label = "Unsupervised"
+
+    def __init__(self, session, ui):
+        from ..fit.pipelines import PIPELINES
+
+        self.session = session
+        self.root = session.client.scene.add_frame("/unsupervised", show_axes=False)
+        self.points: np.ndarray | None = None
+        self.name = "cloud"
+        self.result = None
+        self.status = Status(session, ui)
+        self.count = ui.add_number("Poisson samples of a mesh", 2000, min=10, max=200000, step=1)
+        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        names = tuple(k for k, p in PIPELINES.items() if not p.supervised)
+        self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="default" if "default" in names else names[0])
+        self.ctrl = ui.add_vector2("Control grid", (15, 15), min=(2, 2), max=(64, 64), step=1)
+        self.degree = ui.add_vector2("Degree", (3, 3), min=(1, 1), max=(7, 7), step=1)
+        self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
+        self.weights = ui.add_text("Loss weights (e.g. chamfer=1 laplacian=0.001; blank: the pipeline's)", "")
+        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
+        self.show_error = ui.add_checkbox("Colour points by error", True)
+        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit")
+        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.surface_view = SplineView(session.client.scene, "/unsupervised/surface", RESULT_COLOR)
+        self.cloud_handle = None
+
+    # loading
+    def _read(self, path: Path, name: str):
+        import nurbskit
+
+        try:
+            mesh = nurbskit.io.read_mesh(path)
+        except InputError as exc:
+            if "no faces" not in str(exc) and "point cloud" not in str(exc):
+                raise InputError(f"{name}: {exc}".replace(str(path), name)) from None
+            mesh = None
+        except Exception as exc:  # noqa: BLE001 - a reader's own words, with the client's name
+            raise InputError(f"{name}: not a readable point cloud or mesh ({str(exc).replace(str(path), name)})") from None
+        if mesh is not None:
+            n = int(self.count.value)
+            pts = nurbskit.sample_mesh(mesh.vertices, mesh.faces, n, method="poisson", seed=0)
+            return np.asarray(pts, dtype=np.float64), f"mesh, {n:,} Poisson samples"
+        cloud = nurbskit.io.read_points(path)
+        return np.asarray(cloud.points, dtype=np.float64), "cloud"
+
+    def _loaded(self, data, name: str) -> None:
+        points, what = data
+        if points.shape[0] < 4:
+            raise InputError(f"{name}: {points.shape[0]} points; a surface fit needs at least 4")
+        self.points, self.name, self.result = points, Path(name).stem or "cloud", None
+        self.session.focus(self.label)
+        self.surface_view.clear()
+        self.cloud_handle = draw_points(self.session.client.scene, "/unsupervised/input", points)
+        self.session.frame(points)
+        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
+
+    # fitting
+    def config(self):
+        from ..fit.pipelines import get_pipeline
+
+        cfg = get_pipeline(self.pipeline.value)
+        cfg = dataclasses.replace(cfg, ctrl=tuple(int(x) for x in self.ctrl.value),
+                                  degree=tuple(int(x) for x in self.degree.value), device=self.device.value)
+        cfg = _apply_loss_weights(cfg, self.weights.value)
+        return _apply_iterations(cfg, int(self.iters.value)).validate()
+
+    def _fit(self, progress, stop):
+        import nurbskit
+
+        if self.points is None:
+            raise OptionError("load a point cloud or mesh first")
+        cfg = self.config()
+        total = max(1, cfg.total_iters)
+        done = [0]
+
+        def callback(p):
+            done[0] += 1
+            progress(min(1.0, done[0] / total), p.loss)
+
+        progress(0.0)
+        result = nurbskit.fit_surface(self.points, cfg, callback=callback)
+        from ..fit import fit_report
+
+        report = fit_report(result, distances=True)
+        return result, report
+
+    def _done(self, out) -> None:
+        result, report = out
+        self.result = result
+        self.session.focus(self.label)
+        self.surface_view.draw(result.surface.detach().to(torch.float64))
+        if self.show_error.value:
+            d = report["_distances"].detach().cpu().numpy()
+            colors = colormap(d, 0.0, float(np.percentile(d, 99)) or 1.0)
+            pts = result.points.detach().cpu().numpy()
+            self.cloud_handle = draw_points(self.session.client.scene, "/unsupervised/input", pts, colors)
+        self.runner.metrics.content = _metrics_markdown(report)
+        self.status.info(f"fit finished: {report['iterations']} iterations in {report['seconds']:.2f} s")
+
+    def shown(self):
+        surface = None if self.result is None else self.result.surface.detach().to(torch.float64)
+        return surface, None, f"{self.name}-{self.pipeline.value}"
+
+
+def build_unsupervised(session, ui):
+    return UnsupervisedTab(session, ui)
+
+
+# ---- Supervised -------------------------------------------------------------------------
+
+class SupervisedTab:
+    """Load a NURBS (nurbskit/geomdl JSON, .ctrlpts + .weights, .3dm), fit it, compare."""
+
+    label = "Supervised"
+
+    def __init__(self, session, ui):
+        from ..fit.pipelines import PIPELINES
+
+        self.session = session
+        self.root = session.client.scene.add_frame("/supervised", show_axes=False)
+        self.target = None
+        self.result = None
+        self.name = "target"
+        self.status = Status(session, ui)
+        ui.add_markdown("`.ctrlpts` files take sizes and degrees below (or a side `<file>.json`); "
+                        "a `.weights` file beside one in the workdir is read with it.")
+        self.sizes = ui.add_text("Sizes of a .ctrlpts grid", "")
+        self.degrees = ui.add_text("Degrees of a .ctrlpts grid", "3 3")
+        self.weights = None  # from an uploaded .weights file, for the next uploaded .ctrlpts
+        self.weights_upload = ui.add_upload_button("Upload .weights (for an uploaded .ctrlpts)")
+        self.weights_upload.on_upload(lambda event: self.loader._guard(self._weights_uploaded))
+        session.upload_status[self.weights_upload._impl.uuid] = self.status
+        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load NURBS")
+        names = tuple(k for k, p in PIPELINES.items() if p.supervised)
+        self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="SC" if "SC" in names else names[0])
+        self.resolution = ui.add_vector2("Target grid", (32, 32), min=(2, 2), max=(256, 256), step=1)
+        self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
+        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
+        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit")
+        self.export = ExportPanel(session, ui, self.status, self.shown)
+        scene = session.client.scene
+        self.truth_view = SplineView(scene, "/supervised/truth", SURFACE_COLOR)
+        self.result_view = SplineView(scene, "/supervised/result", RESULT_COLOR)
+
+    def _weights_uploaded(self) -> None:
+        import nurbskit
+        from .workdir import check_upload
+
+        file = self.weights_upload.value
+        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
+        tmp = self.session.workdir.scratch(".weights")
+        try:
+            tmp.write_bytes(file.content)
+            try:
+                self.weights = np.asarray(nurbskit.io.read_weights(tmp), dtype=np.float64)
+            except Exception as exc:  # noqa: BLE001
+                raise InputError(str(exc).replace(str(tmp), Path(file.name).name)) from None
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.status.info(f"{Path(file.name).name}: {self.weights.size} weights, used by the next .ctrlpts upload")
+
+    def _read(self, path: Path, name: str):
+        import nurbskit
+
+        options = {}
+        if Path(name).suffix.lower() == ".ctrlpts" and self.weights is not None and ".studio" in path.parts:
+            options["weights"] = self.weights  # an upload has no sibling .weights file
+        if Path(name).suffix.lower() in (".ctrlpts", ".cptw"):
+            if self.sizes.value.strip():
+                options["sizes"] = [int(x) for x in self.sizes.value.replace(",", " ").split()]
+            if self.degrees.value.strip():
+                options["degrees"] = [int(x) for x in self.degrees.value.replace(",", " ").split()]
+        try:
+            obj = nurbskit.io.read_nurbs(path, **options)
+        except (InputError, OptionError) as exc:
+            raise type(exc)(str(exc).replace(str(path), name)) from None
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"{name}: not a readable NURBS file ({exc})") from None
+        if obj.para_dim != 2 or obj.control_points.shape[-1] != 3:
+            raise InputError(f"{name}: holds a {obj.kind} in {obj.control_points.shape[-1]}-D; "
+                             "the supervised pipelines fit 3-D surfaces")
+        return obj
+
+    def _loaded(self, obj, name: str) -> None:
+        self.target, self.result, self.name = obj.to(torch.float64), None, Path(name).stem or "target"
+        self.session.focus(self.label)
+        self.result_view.clear()
+        self.truth_view.draw(self.target)
+        self.session.frame(self.target.control_points.numpy())
+        self.status.info(f"loaded {name}: {obj.kind} {tuple(obj.sizes)} degrees {tuple(obj.degrees)}")
+
+    def _fit(self, progress, stop):
+        import nurbskit
+        from ..fit import fit_report
+        from ..fit.pipelines import get_pipeline
+
+        if self.target is None:
+            raise OptionError("load a NURBS surface first")
+        cfg = dataclasses.replace(get_pipeline(self.pipeline.value),
+                                  resolution=tuple(int(x) for x in self.resolution.value), device=self.device.value)
+        cfg = _apply_iterations(cfg, int(self.iters.value)).validate()
+        total = max(1, cfg.total_iters)
+        done = [0]
+
+        def callback(p):
+            done[0] += 1
+            progress(min(1.0, done[0] / total), p.loss)
+
+        progress(0.0)
+        result = nurbskit.fit_surface(config=cfg, target_surface=self.target, callback=callback)
+        return result, fit_report(result)
+
+    def _done(self, out) -> None:
+        result, report = out
+        self.result = result
+        self.session.focus(self.label)
+        surface = result.surface.detach().to(torch.float64)
+        # side by side: the result to the right of the ground truth
+        shift = 1.2 * diagonal(self.target.control_points.numpy())
+        self.result_view.offset = np.array([shift, 0.0, 0.0])
+        self.result_view.shape_key = None
+        self.result_view.draw(surface)
+        self.session.frame(np.concatenate([self.target.control_points.numpy().reshape(-1, 3),
+                                           surface.control_points.numpy().reshape(-1, 3) + [shift, 0.0, 0.0]]))
+        self.runner.metrics.content = _metrics_markdown(report)
+        self.status.info(f"fit finished: RMS {report.get('rms', float('nan')):.3g} to the target; "
+                         "ground truth left (blue), result right (orange)")
+
+    def shown(self):
+        obj = self.result.surface.detach().to(torch.float64) if self.result is not None else self.target
+        return obj, None, f"{self.name}-{self.pipeline.value}"
+
+
+def build_supervised(session, ui):
+    return SupervisedTab(session, ui)
+
+
+# ---- Volume from drawings ------------------------------------------------------------------
+
+class VolumeTab:
+    """Three drawings (front, left, top) -> a NURBS volume and its isosurface."""
+
+    label = "Volume from drawings"
+
+    def __init__(self, session, ui):
+        self.session = session
+        self.root = session.client.scene.add_frame("/volume", show_axes=False)
+        self.drawings: dict[str, torch.Tensor] = {}
+        self.fit = None
+        self.status = Status(session, ui)
+        self.which = ui.add_dropdown("Drawing to load", ("front", "left", "top"), initial_value="front")
+        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load drawing")
+        self.sample = ui.add_button("Use the paper's drawings")
+        self.control = ui.add_number("Control values per axis", 20, min=4, max=80, step=1)
+        self.grid = ui.add_number("Cost grid per axis", 20, min=4, max=128, step=1)
+        self.iters = ui.add_number("Iterations", 60, min=0, max=2000, step=1)
+        self.loss = ui.add_dropdown("Cost", ("paper", "silhouette"), initial_value="paper")
+        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit volume")
+        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.sample.on_click(lambda event: self._paper())
+
+    def _read(self, path: Path, name: str):
+        from ..volume import load_drawing
+
+        try:
+            return load_drawing(str(path), name=self.which.value)
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(str(exc).replace(str(path), name)) from None
+
+    def _loaded(self, mask, name: str) -> None:
+        self.drawings[self.which.value] = mask
+        missing = [v for v in ("front", "left", "top") if v not in self.drawings]
+        self.status.info(f"{self.which.value} drawing: {name} {tuple(mask.shape)}"
+                         + (f"; still needed: {', '.join(missing)}" if missing else "; ready"))
+
+    def _paper(self) -> None:
+        from ..volume.shapes import paper_drawings
+
+        self.drawings = dict(paper_drawings(96))
+        self.status.info("the paper's drawings (front, left, top) are loaded")
+
+    def _fit(self, progress, stop):
+        import nurbskit
+
+        missing = [v for v in ("front", "left", "top") if v not in self.drawings]
+        if missing:
+            raise OptionError(f"load the {', '.join(missing)} drawing(s) first")
+        iters = int(self.iters.value)
+
+        def callback(stage, done, total, cost):
+            progress(0.99 * done / max(1, total) if stage == "fit" else 1.0, cost)
+
+        return nurbskit.fit_silhouettes(
+            self.drawings["front"], self.drawings["left"], self.drawings["top"],
+            control_size=int(self.control.value), grid=int(self.grid.value), iterations=iters,
+            loss=self.loss.value, callback=callback,
+        )
+
+    def _done(self, fit) -> None:
+        self.fit = fit
+        self.session.focus(self.label)
+        if fit.mesh.is_empty:
+            self.status.error(fit.message or "the fitted volume has no isosurface")
+            return
+        draw_mesh(self.session.client.scene, "/volume/mesh", fit.mesh.vertices, fit.mesh.faces)
+        self.session.frame(fit.mesh.vertices)
+        rows = "\n".join(f"| IoU {k} | {v:.3f} |" for k, v in fit.iou.items())
+        self.runner.metrics.content = (f"**Metrics**\n\n| | |\n|---|---|\n| iterations | {fit.iterations} |\n{rows}")
+        self.status.info(f"volume fitted: {len(fit.mesh.faces):,} triangles")
+
+    def shown(self):
+        if self.fit is None:
+            return None, None, "volume"
+        return self.fit.volume, (self.fit.mesh.vertices, self.fit.mesh.faces), "volume"
+
+
+def build_volume(session, ui):
+    return VolumeTab(session, ui)

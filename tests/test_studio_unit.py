@@ -1,0 +1,228 @@
+"""The studio's parts that need no browser: folder confinement, the tab registry, the
+generator's objects, the command line's options."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from _assert import assert_close
+from nurbskit.errors import InputError, OptionError
+from nurbskit.studio.registry import TABS, TabSpec, available_tabs
+from nurbskit.studio.workdir import Workdir, check_upload
+
+
+@pytest.fixture
+def folder(tmp_path):
+    work, outside = tmp_path / "work", tmp_path / "outside"
+    (work / "sub").mkdir(parents=True)
+    outside.mkdir()
+    (work / "a.ply").write_text("x")
+    (work / "sub" / "b.json").write_text("{}")
+    (outside / "secret.ply").write_text("s")
+    os.symlink(outside / "secret.ply", work / "link.ply")
+    os.symlink(outside, work / "linkdir")
+    return Workdir(work), work, outside
+
+
+def test_resolve_inside(folder):
+    wd, work, _ = folder
+    assert wd.resolve("a.ply") == (work / "a.ply").resolve()
+    assert wd.resolve("sub/b.json") == (work / "sub" / "b.json").resolve()
+
+
+@pytest.mark.parametrize("name, words", [
+    ("../outside/secret.ply", "'..' is not allowed"),
+    ("sub/../../outside/secret.ply", "'..' is not allowed"),
+    ("/etc/passwd", "relative"),
+    ("~/x.ply", "relative"),
+    ("C:/x.ply", "relative"),
+    ("sub\\b.json", "backslashes"),
+    ("link.ply", "outside"),
+    ("linkdir/secret.ply", "outside"),
+    ("", "no file name"),
+    ("missing.ply", "no such file"),
+])
+def test_resolve_refuses(folder, name, words):
+    wd = folder[0]
+    with pytest.raises(OptionError, match=None) as info:
+        wd.resolve(name)
+    assert words in str(info.value)
+
+
+def test_files_lists_only_inside(folder):
+    wd = folder[0]
+    assert wd.files() == ["a.ply", "sub/b.json"]
+
+
+def test_scratch_keeps_only_a_safe_extension(folder):
+    wd, work, _ = folder
+    for name, ext in (("../../evil.ply", ".ply"), ("x.json", ".json"), ("a.b/../c", ""), ("bad.p;y", "")):
+        path = wd.scratch(name)
+        assert path.parent == work / ".studio" / "uploads" and path.suffix == ext
+        assert ".." not in path.name
+
+
+def test_output_name_is_confined(folder):
+    wd, work, _ = folder
+    assert wd.output_name("new/out.json") == (work / "new" / "out.json").resolve()
+    with pytest.raises(OptionError):
+        wd.output_name("../out.json")
+    with pytest.raises(OptionError, match="directory"):
+        wd.output_name("sub")
+
+
+def test_upload_limit():
+    check_upload("a.ply", b"x" * 10, 10)
+    with pytest.raises(InputError, match="at most 10"):
+        check_upload("a.ply", b"x" * 11, 10)
+    with pytest.raises(InputError, match="empty"):
+        check_upload("a.ply", b"", 10)
+
+
+def test_registry_shows_a_tab_only_when_its_capability_imports():
+    labels = [t.label for t in available_tabs()]
+    assert labels[:3] == ["Unsupervised", "Supervised", "NURBS Generator"]
+    assert "Volume from drawings" in labels
+    assert not TabSpec("X", "nurbskit.no_such_module", None, "nurbskit.studio.tabs:build_volume").available()
+    assert not TabSpec("X", "nurbskit.fit", "no_such_function", "nurbskit.studio.tabs:build_volume").available()
+    for spec in TABS:  # a listed tab has a builder, an unlisted one lacks its capability or builder
+        assert (spec in available_tabs()) == (spec.available() and spec.load_builder() is not None)
+
+
+@pytest.mark.parametrize("kind, k", [("curve", 1), ("surface", 2), ("volume", 3)])
+@pytest.mark.parametrize("knots", ["clamped", "uniform", "periodic"])
+def test_generator_objects(kind, k, knots):
+    from nurbskit.studio.generator import make_object
+
+    obj, free = make_object(kind, (6, 5, 4), (3, 2, 2), knots)
+    assert obj.para_dim == k and obj.control_points.dtype == torch.float64
+    if knots == "periodic":
+        assert free == 6 and obj.sizes[0] == 6 + 3
+        # closed: the two ends of the u domain meet, with matching first derivatives
+        a, b = obj.domain[0]
+        rest = [[sum(d) / 2] for d in obj.domain[1:]]
+        ends = [obj.evaluate_grid(*([torch.tensor([u], dtype=torch.float64)] + [torch.tensor(r, dtype=torch.float64) for r in rest]), order=1)
+                for u in (a, b)]
+        assert_close(ends[0], ends[1], atol=1e-10)
+    elif knots == "uniform":
+        kv = obj.knot_vectors[0]
+        assert_close(kv[1:] - kv[:-1], torch.full_like(kv[1:], float(kv[1] - kv[0])), atol=1e-12)
+    else:
+        assert float(obj.knot_vectors[0][0]) == float(obj.knot_vectors[0][3]) == 0.0
+
+
+def test_generator_refuses_bad_sizes():
+    from nurbskit.studio.generator import make_object
+
+    with pytest.raises(OptionError, match="need at least 4"):
+        make_object("surface", (3, 5, 2), (3, 3, 2), "clamped")
+
+
+def test_gaussian_curvature_of_a_sphere_patch():
+    """A rational quadratic patch of the unit sphere (a quarter circle revolved): K = 1."""
+    import nurbskit
+    from nurbskit.studio.scene import gaussian_curvature
+
+    s2 = np.sqrt(0.5)
+    arc = np.array([[1, 0], [1, 1], [0, 1]], float)  # quarter circle in (r, z)
+    w_arc = np.array([1, s2, 1])
+    ring = np.array([[1, 0], [1, 1], [0, 1]], float)  # quarter circle in (x, y)
+    w_ring = np.array([1, s2, 1])
+    cp = np.zeros((3, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            cp[i, j] = [arc[i, 0] * ring[j, 0], arc[i, 0] * ring[j, 1], arc[i, 1]]
+    w = w_arc[:, None] * w_ring[None, :]
+    surface = nurbskit.NURBSSurface(torch.tensor(cp), (2, 2), weights=torch.tensor(w))
+    K = gaussian_curvature(surface, (9, 9))
+    interior = K.reshape(9, 9)[1:-1, :]  # the pole row (u = 1) is degenerate
+    assert_close(interior, np.ones_like(interior), atol=1e-9)
+
+
+def test_cli_refuses_bad_options(tmp_path, capsys):
+    from nurbskit.cli import main
+
+    assert main(["studio", "--port", "99999"]) == 2
+    assert "--port" in capsys.readouterr().err
+    assert main(["studio", "--workdir", str(tmp_path / "nope")]) == 2
+    assert "--workdir" in capsys.readouterr().err
+    assert main(["studio", "--max-upload-mb", "-1"]) == 2
+    assert "--max-upload-mb" in capsys.readouterr().err
+
+
+def test_missing_viser_names_the_extra(monkeypatch, capsys, tmp_path):
+    import sys
+
+    from nurbskit.cli import main
+
+    monkeypatch.setitem(sys.modules, "viser", None)  # import viser -> ImportError
+    assert main(["studio", "--workdir", str(tmp_path), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'nurbskit[studio]'" in err and "Traceback" not in err
+
+
+def test_command_serves_the_page(tmp_path):
+    """``nurbskit studio --port 0`` answers HTTP on loopback with viser's page; Ctrl-C stops it."""
+    import re
+    import signal
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+
+    try:
+        import viser  # noqa: F401
+    except ImportError:
+        if os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0"):
+            pytest.fail("NURBSKIT_REQUIRE_EXTRAS is set but viser is missing")
+        pytest.skip("viser is not installed")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    proc = subprocess.Popen([sys.executable, "-m", "nurbskit", "studio", "--port", "0", "--workdir", str(tmp_path)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = ""
+        end = time.monotonic() + 60
+        while "serving" not in line and time.monotonic() < end:
+            line = proc.stderr.readline()
+            assert line or proc.poll() is None, "the studio exited early"
+        url = re.search(r"http://127\.0\.0\.1:\d+/", line).group(0)
+        with urllib.request.urlopen(url, timeout=30) as response:
+            assert response.status == 200 and b"<html" in response.read(2000).lower()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            rest = proc.communicate(timeout=30)[1]
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    assert proc.returncode == 130 and "Traceback" not in rest
+
+
+def test_loss_weights_and_iterations_from_the_panel():
+    from nurbskit.fit.pipelines import get_pipeline
+    from nurbskit.studio.tabs import _apply_iterations, _apply_loss_weights
+
+    cfg = _apply_loss_weights(get_pipeline("UCDL"), "chamfer=2, laplacian=0.5")
+    assert all(s.loss.chamfer == 2.0 and s.loss.laplacian == 0.5 for s in cfg.stages)
+    assert _apply_loss_weights(get_pipeline("UCDL"), "  ").stages == get_pipeline("UCDL").stages
+    for bad, words in (("laplace=1", "expected name=value"), ("chamfer=x", "needs a number"),
+                       ("chamfer=-1", ">= 0"), ("laplacian_on=1", "expected name=value")):
+        with pytest.raises(OptionError, match=words):
+            _apply_loss_weights(get_pipeline("UCDL"), bad)
+    sb = get_pipeline("SB")
+    scaled = _apply_iterations(sb, 40)
+    assert sum(s.iters for s in scaled.stages) == 40 and len(scaled.stages) == len(sb.stages)
+    assert _apply_iterations(sb, 0).stages == sb.stages
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("127.0.0.2", True), ("localhost", True),
+                                            ("::1", True), ("0.0.0.0", False), ("192.168.1.5", False),
+                                            ("example.org", False), ("::", False)])
+def test_only_loopback_hosts_go_without_a_warning(host, loopback):
+    from nurbskit.cli.studio_command import is_loopback
+
+    assert is_loopback(host) is loopback
