@@ -146,7 +146,7 @@ class UnsupervisedTab:
 
         cfg = get_pipeline(self.pipeline.value)
         cfg = dataclasses.replace(cfg, ctrl=tuple(int(x) for x in self.ctrl.value),
-                                  degree=tuple(int(x) for x in self.degree.value), device=self.device.value)
+                                  degree=tuple(int(x) for x in self.degree.value))
         cfg = _apply_loss_weights(cfg, self.weights.value)
         return _apply_iterations(cfg, int(self.iters.value)).validate()
 
@@ -164,7 +164,11 @@ class UnsupervisedTab:
             progress(min(1.0, done[0] / total), p.loss)
 
         progress(0.0)
-        result = nurbskit.fit_surface(self.points, cfg, callback=callback)
+        import torch
+
+        # the fit runs where its inputs are: the device choice only moves the points
+        points = torch.as_tensor(self.points, dtype=torch.float64).to(self.device.value)
+        result = nurbskit.fit_surface(points, cfg, callback=callback)
         from ..fit import fit_report
 
         report = fit_report(result, distances=True)
@@ -283,7 +287,7 @@ class SupervisedTab:
         if self.target is None:
             raise OptionError("load a NURBS surface first")
         cfg = dataclasses.replace(get_pipeline(self.pipeline.value),
-                                  resolution=tuple(int(x) for x in self.resolution.value), device=self.device.value)
+                                  resolution=tuple(int(x) for x in self.resolution.value))
         cfg = _apply_iterations(cfg, int(self.iters.value)).validate()
         total = max(1, cfg.total_iters)
         done = [0]
@@ -293,7 +297,8 @@ class SupervisedTab:
             progress(min(1.0, done[0] / total), p.loss)
 
         progress(0.0)
-        result = nurbskit.fit_surface(config=cfg, target_surface=self.target, callback=callback)
+        result = nurbskit.fit_surface(config=cfg, target_surface=self.target.to(device=self.device.value),
+                                      callback=callback)
         return result, fit_report(result)
 
     def _done(self, out) -> None:
@@ -376,11 +381,14 @@ class VolumeTab:
         def callback(stage, done, total, cost):
             progress(0.99 * done / max(1, total) if stage == "fit" else 1.0, cost)
 
-        return nurbskit.fit_silhouettes(
-            self.drawings["front"], self.drawings["left"], self.drawings["top"],
-            control_size=int(self.control.value), grid=int(self.grid.value), iterations=iters,
-            loss=self.loss.value, callback=callback,
-        )
+        from ..volume.config import get_preset
+
+        control, grid = int(self.control.value), int(self.grid.value)
+        cfg = dataclasses.replace(get_preset("default"), control_size=(control,) * 3, grid=(grid,) * 3,
+                                  iterations=iters, loss=self.loss.value)
+        cfg = cfg.validate()
+        views = {v: self.drawings[v] for v in ("front", "left", "top")}
+        return nurbskit.fit_silhouettes(views, cfg, callback=callback)
 
     def _done(self, fit) -> None:
         self.fit = fit
