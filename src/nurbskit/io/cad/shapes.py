@@ -1,0 +1,505 @@
+"""nurbskit objects to OpenCASCADE shapes and back: faces with trimming wires, sewn
+shells, triangulated solids, and the nurbskit objects found in any shape.
+
+Convention:
+    A :class:`~nurbskit.core.trim.TrimmedSurface` becomes one face on its surface. Each
+    trimming loop (a closed polyline in (u, v)) becomes one closed edge whose curve on
+    the surface is the polyline itself (a degree-1 ``Geom2d_BSplineCurve`` through the
+    loop's points, parameter = cumulative chord length in (u, v)); OCC builds the edge's
+    3-D curve from it (``BRepLib::BuildCurves3d``, an approximation within the edge
+    tolerance, as every CAD system does for curves on surfaces). The outer loop runs
+    counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
+    kept region is on the left of every loop. A surface without loops is bounded by its
+    parameter domain (its natural boundary).
+
+    Reading, every face gives one TrimmedSurface: a B-spline surface as stored (exact,
+    periodic directions unwrapped), any other surface (plane, cylinder, cone, sphere,
+    torus, revolution, extrusion, offset) converted to a B-spline by OCC's
+    ``BRepBuilderAPI_NurbsConvert`` restricted to that face; its wires as UV polylines
+    (line and degree-1 pcurves exactly at their vertices, curved pcurves sampled with
+    ``GCPnts_TangentialDeflection``), the outer wire (``BRepTools::OuterWire``) as the
+    outer loop and the others as holes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from ...core.curve import NURBSCurve
+from ...core.spline import TensorSpline
+from ...core.trim import TrimLoop, TrimmedSurface
+from ...errors import NurbskitError, OptionError
+from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_from_occ, surface_to_occ
+
+#: default modelling tolerance (model units, millimetres): OCC's Precision::Confusion is 1e-7
+TOLERANCE = 1e-7
+#: tolerance of the 3-D curves built from trimming polylines, relative to the surface's size
+CURVE_TOLERANCE = 1e-7
+
+
+@dataclass
+class CadModel:
+    """The nurbskit objects of a CAD file.
+
+    Attributes:
+        faces: one :class:`TrimmedSurface` per face, in the file's order.
+        face_types: the surface type of each face as stored (``'BSplineSurface'``,
+            ``'Plane'``, ``'CylindricalSurface'``, ...), before conversion.
+        curves: free edges (not bounding a face) as NURBS curves.
+        reversed: per face, whether the face is reversed (its normal is the opposite of
+            the surface's ``S_u x S_v``).
+    """
+
+    faces: list[TrimmedSurface] = field(default_factory=list)
+    face_types: list[str] = field(default_factory=list)
+    curves: list[NURBSCurve] = field(default_factory=list)
+    reversed: list[bool] = field(default_factory=list)
+
+    @property
+    def surfaces(self):
+        return [f.surface for f in self.faces]
+
+
+# ---- writing: nurbskit -> shapes ----------------------------------------------------------
+
+def _chord_parameters(uv: np.ndarray) -> np.ndarray:
+    seg = np.linalg.norm(np.diff(uv, axis=0), axis=1)
+    if np.any(seg <= 0):
+        raise OptionError("a trimming loop has two equal consecutive (u, v) points")
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def _loop_edge(loop: TrimLoop, surface_geom):
+    """One closed edge on ``surface_geom`` along the loop's (u, v) polyline."""
+    ocp()
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.collections import Array1_gp_Pnt2d
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.gp import gp_Pnt2d
+
+    from .occ import _array1
+
+    uv = np.vstack([loop.uv, loop.uv[:1]])  # closed: the first point again at the end
+    t = _chord_parameters(uv)
+    poles = Array1_gp_Pnt2d(1, len(uv))
+    for i, (u, v) in enumerate(uv):
+        poles.SetValue(i + 1, gp_Pnt2d(float(u), float(v)))
+    mult = np.ones(len(t), dtype=int)
+    mult[0] = mult[-1] = 2
+    pcurve = Geom2d_BSplineCurve(poles, _array1(t, "float"), _array1(mult, "int"), 1, False)
+    maker = BRepBuilderAPI_MakeEdge(pcurve, surface_geom)
+    if not maker.IsDone():
+        raise NurbskitError(f"OpenCASCADE could not make an edge from a trimming loop (error {maker.Error()})")
+    return maker.Edge()
+
+
+def face_of(obj, tolerance: float = TOLERANCE):
+    """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
+    ocp()
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepLib import BRepLib
+    from OCP.ShapeFix import ShapeFix_Face
+
+    trimmed = obj if isinstance(obj, TrimmedSurface) else TrimmedSurface(obj, [])
+    geom = surface_to_occ(trimmed.surface)
+    if not trimmed.loops:
+        maker = BRepBuilderAPI_MakeFace(geom, tolerance)
+        if not maker.IsDone():
+            raise NurbskitError(f"OpenCASCADE could not make a face from this surface (error {maker.Error()})")
+        return maker.Face()
+    (u0, u1), (v0, v1) = trimmed.surface.domain
+    for loop in trimmed.loops:
+        lo, hi = loop.uv.min(axis=0), loop.uv.max(axis=0)
+        slack = 1e-9 * max(u1 - u0, v1 - v0)
+        if lo[0] < u0 - slack or hi[0] > u1 + slack or lo[1] < v0 - slack or hi[1] > v1 + slack:
+            raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
+                              f"(loop bounds {lo.tolist()} to {hi.tolist()})")
+    wires = []
+    for loop in trimmed.loops:
+        edge = _loop_edge(loop, geom)
+        wires.append(BRepBuilderAPI_MakeWire(edge).Wire())
+    outer = wires[0] if trimmed.outer is not None else None
+    if outer is None:  # holes only: the natural boundary is the outer loop
+        maker = BRepBuilderAPI_MakeFace(geom, tolerance)
+        face = maker.Face()
+        from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace as MF
+
+        maker = MF(face)
+        for w in wires:
+            maker.Add(w)
+    else:
+        maker = BRepBuilderAPI_MakeFace(geom, outer, True)
+        for w in wires[1:]:
+            maker.Add(w)
+    if not maker.IsDone():
+        raise NurbskitError(f"OpenCASCADE could not make a trimmed face (error {maker.Error()})")
+    face = maker.Face()
+    size = _surface_size(trimmed.surface)
+    BRepLib.BuildCurves3d_s(face, CURVE_TOLERANCE * max(size, 1.0))
+    BRepLib.SameParameter_s(face, CURVE_TOLERANCE * max(size, 1.0))
+    fixer = ShapeFix_Face(face)
+    fixer.FixOrientation()  # only if OCC sees a loop the wrong way round (it should not)
+    return fixer.Face()
+
+
+def _surface_size(surface) -> float:
+    cp = surface.control_points.detach().cpu().double().numpy().reshape(-1, surface.dim)
+    return float(np.linalg.norm(cp.max(axis=0) - cp.min(axis=0)))
+
+
+def edge_of(curve: NURBSCurve):
+    """A ``TopoDS_Edge`` on the curve's 3-D B-spline over its whole domain."""
+    ocp()
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+
+    maker = BRepBuilderAPI_MakeEdge(curve_to_occ(curve))
+    if not maker.IsDone():
+        raise NurbskitError(f"OpenCASCADE could not make an edge from this curve (error {maker.Error()})")
+    return maker.Edge()
+
+
+def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
+    """A triangle mesh as a solid bounded by planar triangular faces sharing edges.
+
+    The mesh's vertices become shared ``TopoDS_Vertex`` objects and each undirected mesh
+    edge one shared ``TopoDS_Edge``, so the faces are connected (no sewing needed). A
+    closed, consistently oriented mesh (as ``nurbskit volume`` writes) gives a valid
+    solid; an open one gives a shell.
+
+    Args:
+        vertices: ``(V, 3)``.
+        faces: ``(F, 3)`` vertex indices, counter-clockwise seen from outside.
+    """
+    ocp()
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeVertex
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.gp import gp_Pnt
+    from OCP.TopoDS import TopoDS_Shell, TopoDS_Solid, TopoDS_Wire
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+        raise OptionError(f"a mesh needs vertices (V, 3) and triangles (F, 3); got {v.shape} and {f.shape}")
+    if len(f) == 0:
+        raise OptionError("the mesh has no triangles; nothing to write")
+    if f.min() < 0 or f.max() >= len(v):
+        raise OptionError(f"mesh faces index vertices 0..{len(v) - 1}, found {f.min()}..{f.max()}")
+    area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    f = f[area2 > 0]  # degenerate triangles have no plane
+    used = np.unique(f)
+    occ_vertices = {int(i): BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, v[i]))).Vertex() for i in used}
+    edges = {}
+
+    def edge(a, b):
+        key = (a, b) if a < b else (b, a)
+        e = edges.get(key)
+        if e is None:
+            e = BRepBuilderAPI_MakeEdge(occ_vertices[key[0]], occ_vertices[key[1]]).Edge()
+            edges[key] = e
+        return e if key == (a, b) else e.Reversed()
+
+    builder = BRep_Builder()
+    shell = TopoDS_Shell()
+    builder.MakeShell(shell)
+    for a, b, c in f.tolist():
+        wire = TopoDS_Wire()
+        builder.MakeWire(wire)
+        for x, y in ((a, b), (b, c), (c, a)):
+            builder.Add(wire, edge(x, y))
+        face = BRepBuilderAPI_MakeFace(wire, True).Face()
+        builder.Add(shell, face)
+    # a closed mesh: every edge in exactly two triangles
+    undirected = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(undirected, axis=0, return_counts=True)
+    closed = bool(np.all(counts == 2))
+    shell.Closed(closed)
+    if not closed:
+        return shell
+    solid = TopoDS_Solid()
+    builder.MakeSolid(solid)
+    builder.Add(solid, shell)
+    if not BRepCheck_Analyzer(solid).IsValid():
+        return shell
+    return solid
+
+
+def _is_mesh(obj) -> bool:
+    return hasattr(obj, "vertices") and hasattr(obj, "faces") and not isinstance(obj, (TensorSpline, TrimmedSurface))
+
+
+def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE):
+    """An OCC shape for a nurbskit object or a list of them.
+
+    NURBSSurface / TrimmedSurface -> face; NURBSCurve -> edge; a mesh (anything with
+    ``vertices (V, 3)`` and ``faces (F, 3)``, such as ``nurbskit volume``'s) -> solid;
+    a list -> a compound whose faces are sewn into shells where neighbouring patches
+    share edges within ``sew_tolerance`` (``None``: no sewing).
+    """
+    ocp()
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Compound
+
+    items = list(obj) if isinstance(obj, (list, tuple)) and not _is_mesh_tuple(obj) else [obj]
+    shapes, faces = [], []
+    for item in items:
+        if _is_mesh_tuple(item):
+            shapes.append(mesh_solid(*item, tolerance=tolerance))
+        elif _is_mesh(item):
+            shapes.append(mesh_solid(item.vertices, item.faces, tolerance=tolerance))
+        elif isinstance(item, TrimmedSurface) or getattr(item, "kind", None) == "surface":
+            faces.append(face_of(item, tolerance))
+        elif getattr(item, "kind", None) == "curve":
+            shapes.append(edge_of(item))
+        elif getattr(item, "kind", None) == "volume":
+            raise OptionError("a NURBS volume is a field, not a CAD solid; write its mesh (nurbskit volume's mesh.obj)")
+        else:
+            raise OptionError(f"cannot write a {type(item).__name__} to a CAD file; expected surfaces, trimmed "
+                              "surfaces, curves or a mesh")
+    if len(faces) > 1 and sew_tolerance is not None:
+        faces = [_sew(faces, sew_tolerance)]
+    shapes = faces + shapes
+    if len(shapes) == 1:
+        return shapes[0]
+    builder = BRep_Builder()
+    compound = TopoDS_Compound()
+    builder.MakeCompound(compound)
+    for s in shapes:
+        builder.Add(compound, s)
+    return compound
+
+
+def _is_mesh_tuple(obj) -> bool:
+    return (isinstance(obj, tuple) and len(obj) == 2 and all(isinstance(a, np.ndarray) for a in obj)
+            and obj[0].ndim == 2 and obj[1].ndim == 2)
+
+
+def _sew(faces, tolerance: float):
+    """Faces sewn where they share edges within ``tolerance``; the others stay free."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
+
+    sewing = BRepBuilderAPI_Sewing(tolerance)
+    for f in faces:
+        sewing.Add(f)
+    sewing.Perform()
+    return sewing.SewedShape()
+
+
+# ---- checking --------------------------------------------------------------------------
+
+def check_shape(shape) -> dict:
+    """OCC's validity check (``BRepCheck_Analyzer``) and counts of the shape's parts."""
+    ocp()
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    counts = count_shapes(shape)
+    return {"valid": bool(BRepCheck_Analyzer(shape).IsValid()), **counts}
+
+
+def count_shapes(shape) -> dict:
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
+    from OCP.TopExp import TopExp
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as TopTools_IndexedMapOfShape
+
+    out = {}
+    for name, kind in (("solids", TopAbs_SOLID), ("shells", TopAbs_SHELL), ("faces", TopAbs_FACE),
+                       ("edges", TopAbs_EDGE)):
+        m = TopTools_IndexedMapOfShape()
+        TopExp.MapShapes_s(shape, kind, m)
+        out[name] = m.Extent()
+    return out
+
+
+# ---- reading: shapes -> nurbskit ------------------------------------------------------------
+
+def _faces(shape):
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    exp = TopExp_Explorer(shape, TopAbs_FACE)
+    while exp.More():
+        yield TopoDS.Face(exp.Current())
+        exp.Next()
+
+
+def _type_name(geom) -> str:
+    name = type(geom).__name__
+    return name[5:] if name.startswith("Geom_") else name
+
+
+def _face_surface(face):
+    """(Geom_BSplineSurface, the face it bounds, the original type name) for one face."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.TopoDS import TopoDS
+
+    geom = BRep_Tool.Surface_s(face)  # with the face's location applied
+    name = _type_name(geom)
+    bspline = as_bspline_surface(geom)
+    if bspline is not None:
+        if name == "RectangularTrimmedSurface":
+            name = "BSplineSurface"
+        return bspline, face, name
+    converted = TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape())
+    bspline = as_bspline_surface(BRep_Tool.Surface_s(converted))
+    if bspline is None:  # pragma: no cover - NurbsConvert always yields B-splines
+        raise NurbskitError(f"OpenCASCADE could not convert a {name} face to a B-spline surface")
+    return bspline, converted, name
+
+
+def _edge_uv(edge, face, deflection: float) -> np.ndarray:
+    """The (u, v) polyline of one edge on a face, in the edge's direction in its wire."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.GCPnts import GCPnts_TangentialDeflection
+    from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Line
+    from OCP.TopAbs import TopAbs_REVERSED
+
+    curve = BRepAdaptor_Curve2d(edge, face)
+    a, b = curve.FirstParameter(), curve.LastParameter()
+    kind = curve.GetType()
+    if kind == GeomAbs_Line:
+        params = np.array([a, b])
+    elif kind == GeomAbs_BSplineCurve and curve.Degree() == 1:
+        bs = curve.BSpline()
+        knots = np.array([bs.Knot(i) for i in range(1, bs.NbKnots() + 1)])
+        params = np.concatenate([[a], knots[(knots > a) & (knots < b)], [b]])
+    else:
+        sampler = GCPnts_TangentialDeflection(curve, 0.05, deflection, 3)
+        params = np.array([sampler.Parameter(i) for i in range(1, sampler.NbPoints() + 1)])
+    pts = np.array([[curve.Value(t).X(), curve.Value(t).Y()] for t in params])
+    if edge.Orientation() == TopAbs_REVERSED:
+        pts = pts[::-1]
+    return pts
+
+
+def _wire_uv(wire, face, deflection: float) -> np.ndarray:
+    from OCP.BRepTools import BRepTools_WireExplorer
+
+    parts = []
+    exp = BRepTools_WireExplorer(wire, face)
+    while exp.More():
+        parts.append(_edge_uv(exp.Current(), face, deflection))
+        exp.Next()
+    if not parts:
+        return np.zeros((0, 2))
+    uv = np.vstack([p[:-1] for p in parts])  # each edge ends where the next begins
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(uv, axis=0), axis=1) > 0])
+    uv = uv[keep]
+    if len(uv) > 1 and np.array_equal(uv[0], uv[-1]):
+        uv = uv[:-1]
+    return uv
+
+
+def face_to_trimmed(face, *, dtype=torch.float64) -> tuple[TrimmedSurface, str]:
+    """A face as a TrimmedSurface (see the module docstring) and its original surface type."""
+    ocp()
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_WIRE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    geom, face, name = _face_surface(face)
+    surface = surface_from_occ(geom, dtype=dtype)
+    u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+    deflection = 1e-4 * max(u1 - u0, v1 - v0, 1e-12)
+    outer = BRepTools.OuterWire_s(face)
+    loops = []
+    exp = TopExp_Explorer(face, TopAbs_WIRE)
+    while exp.More():
+        wire = TopoDS.Wire(exp.Current())
+        uv = _wire_uv(wire, face, deflection)
+        exp.Next()
+        if len(uv) < 3:
+            continue
+        kind = "outer" if wire.IsSame(outer) else "hole"
+        loops.append(TrimLoop(uv, kind))
+    loops = [lp for lp in loops if lp.kind == "outer"][:1] + [lp for lp in loops if lp.kind == "hole"]
+    loops = _drop_natural_boundary(loops, surface)
+    return TrimmedSurface(surface, loops), name
+
+
+def _drop_natural_boundary(loops: list[TrimLoop], surface) -> list[TrimLoop]:
+    """An outer loop that is the domain's rectangle trims nothing: leave it out."""
+    if not loops or loops[0].kind != "outer":
+        return loops
+    (u0, u1), (v0, v1) = surface.domain
+    uv = loops[0].uv
+    scale = max(u1 - u0, v1 - v0)
+    on_edge = (np.isclose(uv[:, 0], u0, rtol=0, atol=1e-9 * scale) | np.isclose(uv[:, 0], u1, rtol=0, atol=1e-9 * scale)
+               | np.isclose(uv[:, 1], v0, rtol=0, atol=1e-9 * scale) | np.isclose(uv[:, 1], v1, rtol=0, atol=1e-9 * scale))
+    if on_edge.all() and abs(loops[0].area - (u1 - u0) * (v1 - v0)) <= 1e-9 * (u1 - u0) * (v1 - v0):
+        return loops[1:]
+    return loops
+
+
+def shape_to_model(shape, *, dtype=torch.float64) -> CadModel:
+    """Every face (as TrimmedSurface) and free edge (as NURBSCurve) of a shape."""
+    ocp()
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_REVERSED
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    model = CadModel()
+    for face in _faces(shape):
+        trimmed, name = face_to_trimmed(face, dtype=dtype)
+        model.faces.append(trimmed)
+        model.face_types.append(name)
+        model.reversed.append(face.Orientation() == TopAbs_REVERSED)
+    exp = TopExp_Explorer(shape, TopAbs_EDGE, TopAbs_FACE)  # edges outside faces
+    while exp.More():
+        edge = TopoDS.Edge(exp.Current())
+        exp.Next()
+        if BRep_Tool.Degenerated_s(edge):
+            continue
+        geom = BRep_Tool.Curve_s(edge, 0.0, 1.0)
+        if geom is None:
+            continue
+        if not isinstance(geom, Geom_BSplineCurve):
+            converted = TopoDS.Edge(BRepBuilderAPI_NurbsConvert(edge, True).Shape())
+            geom = BRep_Tool.Curve_s(converted, 0.0, 1.0)
+            if not isinstance(geom, Geom_BSplineCurve):
+                continue
+        model.curves.append(curve_from_occ(geom, dtype=dtype))
+    return model
+
+
+# ---- tessellation -----------------------------------------------------------------------
+
+def tessellate_shape(shape, tolerance: float, angular: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of every face (``BRepMesh_IncrementalMesh``, chordal ``tolerance`` in model
+    units): vertices ``(V, 3)`` float64 and faces ``(F, 3)`` int64, oriented outward for
+    forward faces (reversed faces are flipped)."""
+    ocp()
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.TopAbs import TopAbs_REVERSED
+    from OCP.TopLoc import TopLoc_Location
+
+    if not tolerance > 0:
+        raise OptionError(f"the tessellation tolerance must be positive, got {tolerance}")
+    BRepMesh_IncrementalMesh(shape, float(tolerance), False, float(angular), True)
+    all_v, all_f, offset = [], [], 0
+    for face in _faces(shape):
+        loc = TopLoc_Location()
+        tri = BRep_Tool.Triangulation_s(face, loc)
+        if tri is None:
+            continue
+        trsf = loc.Transformation()
+        nodes = np.array([[p.X(), p.Y(), p.Z()] for p in
+                          (tri.Node(i).Transformed(trsf) for i in range(1, tri.NbNodes() + 1))])
+        tris = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], dtype=np.int64) - 1
+        if face.Orientation() == TopAbs_REVERSED:
+            tris = tris[:, ::-1]
+        all_v.append(nodes)
+        all_f.append(tris + offset)
+        offset += len(nodes)
+    if not all_v:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    return np.vstack(all_v), np.vstack(all_f)
