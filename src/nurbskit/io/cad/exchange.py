@@ -247,6 +247,26 @@ def cad_info(path: str | os.PathLike) -> dict:
     }
 
 
+def format_cad_info(info: dict, max_faces: int = 50) -> str:
+    """The text form of :func:`cad_info` (``nurbskit info`` without ``--json``)."""
+    lines = [info["file"], f"  format      {info['format']}",
+             f"  faces       {info['num_faces']} ({', '.join(f'{n} {k}' for k, n in info['surface_types'].items())})",
+             f"  topology    {info['solids']} solids, {info['shells']} shells, {info['edges']} edges"
+             + (f", {info['num_curves']} free curves" if info["num_curves"] else ""),
+             f"  check       {'valid' if info['valid'] else 'INVALID'} (OpenCASCADE BRepCheck_Analyzer)"]
+    if info.get("bbox"):
+        lo, hi = info["bbox"]
+        lines.append("  bbox min    " + " ".join(f"{x:.6g}" for x in lo))
+        lines.append("  bbox max    " + " ".join(f"{x:.6g}" for x in hi))
+    lines.append("  face  type                         degrees  control grid  rational  holes")
+    for i, f in enumerate(info["faces"][:max_faces]):
+        lines.append(f"  {i:4d}  {f['type']:<28} {f['degrees'][0]} x {f['degrees'][1]}    "
+                     f"{f['sizes'][0]:>4} x {f['sizes'][1]:<5}  {'yes' if f['rational'] else 'no':<8}  {f['holes']}")
+    if len(info["faces"]) > max_faces:
+        lines.append(f"  ... {len(info['faces']) - max_faces} more faces (--json lists all)")
+    return "\n".join(lines) + "\n"
+
+
 # ---- any nurbskit result to any file --------------------------------------------------------
 
 def read_objects(path: str | os.PathLike) -> list:
@@ -440,6 +460,6 @@ def write_triangles(vertices: np.ndarray, faces: np.ndarray, path: Path, fmt: st
     return {"vertices": int(len(vertices)), "triangles": int(len(faces))}
 
 
-__all__ = ["write_cad", "write_shape", "read_cad", "read_shape", "cad_info", "cad_format", "read_objects",
+__all__ = ["write_cad", "write_shape", "read_cad", "read_shape", "cad_info", "format_cad_info", "cad_format", "read_objects",
            "objects_to_json", "write_result", "result_format", "tessellate_objects", "write_triangles",
            "CAD_FORMATS", "RESULT_FORMATS"]

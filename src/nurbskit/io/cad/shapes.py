@@ -5,9 +5,11 @@ Convention:
     A :class:`~nurbskit.core.trim.TrimmedSurface` becomes one face on its surface. Each
     trimming loop (a closed polyline in (u, v)) becomes one closed edge whose curve on
     the surface is the polyline itself (a degree-1 ``Geom2d_BSplineCurve`` through the
-    loop's points, parameter = cumulative chord length in (u, v)); OCC builds the edge's
-    3-D curve from it (``BRepLib::BuildCurves3d``, an approximation within the edge
-    tolerance, as every CAD system does for curves on surfaces). The outer loop runs
+    loop's points, parameter = cumulative chord length in (u, v)), and its 3-D curve is the
+    exact image of that polyline: along a straight (u, v) segment the surface point is a polynomial of
+    degree ``p + q`` (homogeneous coordinates) within a knot span, so the 3-D curve is a
+    rational B-spline of that degree, computed by :func:`loop_curve_3d` (no
+    approximation, unlike OCC's ``BRepLib::BuildCurves3d``). The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
     kept region is on the left of every loop. A surface without loops is bounded by its
     parameter domain (its natural boundary).
@@ -36,8 +38,8 @@ from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_
 
 #: default modelling tolerance (model units, millimetres): OCC's Precision::Confusion is 1e-7
 TOLERANCE = 1e-7
-#: tolerance of the 3-D curves built from trimming polylines, relative to the surface's size
-CURVE_TOLERANCE = 1e-7
+#: tolerance of the edges on trimming loops, relative to the surface's size (their 3-D curves are exact)
+CURVE_TOLERANCE = 1e-9
 
 
 @dataclass
@@ -72,35 +74,146 @@ def _chord_parameters(uv: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg)])
 
 
-def _loop_edge(loop: TrimLoop, surface_geom):
-    """One closed edge on ``surface_geom`` along the loop's (u, v) polyline."""
-    ocp()
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
-    from OCP.collections import Array1_gp_Pnt2d
-    from OCP.Geom2d import Geom2d_BSplineCurve
-    from OCP.gp import gp_Pnt2d
+def _bernstein_inverse(degree: int) -> np.ndarray:
+    """Inverse of the Bernstein collocation matrix at ``degree + 1`` Chebyshev-Lobatto nodes."""
+    from math import comb
 
-    from .occ import _array1
+    k = np.arange(degree + 1)
+    tau = 0.5 - 0.5 * np.cos(np.pi * k / degree)
+    basis = np.array([[comb(degree, j) * t ** j * (1 - t) ** (degree - j) for j in k] for t in tau])
+    return tau, np.linalg.inv(basis)
+
+
+def _homogeneous(surface):
+    """The surface's homogeneous form ``(x w, y w, z w, w)`` as a non-rational 4-D surface."""
+    from ...core.surface import NURBSSurface
+
+    cp = surface.control_points.detach().cpu().double()
+    w = surface.weights.detach().cpu().double()
+    cp = torch.cat([_pad3(cp) * w[..., None], w[..., None]], dim=-1)
+    return NURBSSurface(cp, surface.degrees, [k.detach().cpu().double() for k in surface.knot_vectors])
+
+
+def _pad3(cp):
+    return cp if cp.shape[-1] == 3 else torch.cat([cp, torch.zeros(cp.shape[:-1] + (1,), dtype=cp.dtype)], dim=-1)
+
+
+def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
+    """The exact 3-D image of a closed (u, v) polyline on ``surface``, as a rational B-spline.
+
+    Along a straight (u, v) segment inside one knot span, ``S(u(t), v(t))`` in homogeneous
+    coordinates is a polynomial of degree ``p + q`` in ``t``: each segment is split where
+    it crosses a knot line, each piece interpolated at ``p + q + 1`` Chebyshev-Lobatto
+    nodes in the Bernstein basis (exact up to rounding), and the pieces joined with C0
+    knots. Its parameter is the polyline's (``params``, cumulative chord length), so the
+    curve and the (u, v) polyline are the same curve on the surface.
+
+    Args:
+        uv: ``(L + 1, 2)`` the loop with its first point repeated at the end.
+        params: ``(L + 1,)`` increasing.
+
+    Returns:
+        ``(poles (M, 3), weights (M,) or None, flat knots, degree)``.
+    """
+    (p, q) = surface.degrees
+    d = p + q
+    (u0, u1), (v0, v1) = surface.domain
+    inner = []  # distinct knots inside the domain, per direction
+    for kv, lo, hi in ((surface.knot_vectors[0], u0, u1), (surface.knot_vectors[1], v0, v1)):
+        k = np.unique(kv.detach().cpu().double().numpy())
+        inner.append(k[(k > lo) & (k < hi)])
+    a, b = uv[:-1], uv[1:]
+    length = params[1:] - params[:-1]  # chord length of each segment
+    eps = 1e-12 * params[-1]
+    seg = [np.arange(len(a)), np.arange(len(a))]
+    cut = [np.zeros(len(a)), np.ones(len(a))]
+    for axis in (0, 1):
+        delta = b[:, axis] - a[:, axis]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = (inner[axis][None, :] - a[:, axis, None]) / delta[:, None]  # (S, K)
+        ok = (delta[:, None] != 0) & (tau * length[:, None] > eps) & ((1 - tau) * length[:, None] > eps)
+        rows, _ = np.nonzero(ok)
+        seg.append(rows)
+        cut.append(tau[ok])
+    seg, cut = np.concatenate(seg), np.concatenate(cut)
+    order = np.lexsort((cut, seg))
+    seg, cut = seg[order], cut[order]
+    # a segment crossing a u and a v knot line at (nearly) one point: one break, not two
+    close = np.zeros(len(seg), dtype=bool)
+    close[1:] = (seg[1:] == seg[:-1]) & ((cut[1:] - cut[:-1]) * length[seg[1:]] <= eps) & (cut[1:] < 1)
+    seg, cut = seg[~close], cut[~close]
+    pts = a[seg] + cut[:, None] * (b - a)[seg]
+    s = params[seg] + cut * length[seg]
+    end = cut == 1  # segment ends exactly at the polyline's points
+    pts[end], s[end] = b[seg[end]], params[seg[end] + 1]
+    first = np.flatnonzero(seg[:-1] == seg[1:])  # pieces: consecutive breaks of one segment
+    starts, ends, s_start, s_end = pts[first], pts[first + 1], s[first], s[first + 1]
+    tau, inverse = _bernstein_inverse(d)
+    nodes = starts[:, None, :] + tau[None, :, None] * (ends - starts)[:, None, :]  # (P, d + 1, 2)
+    nodes[:, 0], nodes[:, -1] = starts, ends
+    h = _homogeneous(surface).evaluate(torch.from_numpy(nodes.reshape(-1, 2))).numpy().reshape(len(starts), d + 1, 4)
+    coeff = np.einsum("jk,pkc->pjc", inverse, h)
+    coeff[:, 0], coeff[:, -1] = h[:, 0], h[:, -1]  # the ends interpolate exactly
+    coeff[1:, 0] = coeff[:-1, -1]  # neighbouring pieces share their end pole
+    poles_h = np.vstack([coeff[0, :1]] + [c[1:] for c in coeff])
+    weights = poles_h[:, 3]
+    if np.any(weights <= 0):  # pragma: no cover - positive weights give positive Bernstein coefficients
+        raise NurbskitError("a trimming loop's 3-D curve has non-positive weights")
+    poles = poles_h[:, :3] / weights[:, None]
+    flat = np.concatenate([[s_start[0]] * (d + 1), np.repeat(s_start[1:], d), [s_end[-1]] * (d + 1)])
+    rational = bool(surface.is_rational)
+    return poles, (weights if rational else None), flat, d
+
+
+def _loop_edge(loop: TrimLoop, surface, surface_geom, tolerance: float):
+    """One closed edge on ``surface_geom`` along the loop's (u, v) polyline, with its exact
+    3-D curve (:func:`loop_curve_3d`)."""
+    ocp()
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.collections import Array1_gp_Pnt, Array1_gp_Pnt2d
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.gp import gp_Pnt, gp_Pnt2d
+    from OCP.TopLoc import TopLoc_Location
+
+    from .occ import _array1, knots_and_multiplicities
 
     uv = np.vstack([loop.uv, loop.uv[:1]])  # closed: the first point again at the end
     t = _chord_parameters(uv)
-    poles = Array1_gp_Pnt2d(1, len(uv))
+    poles2d = Array1_gp_Pnt2d(1, len(uv))
     for i, (u, v) in enumerate(uv):
-        poles.SetValue(i + 1, gp_Pnt2d(float(u), float(v)))
+        poles2d.SetValue(i + 1, gp_Pnt2d(float(u), float(v)))
     mult = np.ones(len(t), dtype=int)
     mult[0] = mult[-1] = 2
-    pcurve = Geom2d_BSplineCurve(poles, _array1(t, "float"), _array1(mult, "int"), 1, False)
-    maker = BRepBuilderAPI_MakeEdge(pcurve, surface_geom)
+    pcurve = Geom2d_BSplineCurve(poles2d, _array1(t, "float"), _array1(mult, "int"), 1, False)
+    poles, weights, flat, degree = loop_curve_3d(surface, uv, t)
+    poles[-1] = poles[0]  # closed exactly
+    knots, mults = knots_and_multiplicities(flat)
+    arr = Array1_gp_Pnt(1, len(poles))
+    for i, (x, y, z) in enumerate(poles.tolist()):
+        arr.SetValue(i + 1, gp_Pnt(x, y, z))
+    if weights is None:
+        curve = Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
+    else:
+        weights[-1] = weights[0]
+        curve = Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"),
+                                  _array1(mults, "int"), degree, False)
+    maker = BRepBuilderAPI_MakeEdge(curve)
     if not maker.IsDone():
         raise NurbskitError(f"OpenCASCADE could not make an edge from a trimming loop (error {maker.Error()})")
-    return maker.Edge()
+    edge = maker.Edge()
+    builder = BRep_Builder()
+    builder.UpdateEdge(edge, pcurve, surface_geom, TopLoc_Location(), tolerance)
+    builder.SameParameter(edge, True)
+    builder.SameRange(edge, True)
+    return edge
 
 
 def face_of(obj, tolerance: float = TOLERANCE):
     """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
     ocp()
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
-    from OCP.BRepLib import BRepLib
     from OCP.ShapeFix import ShapeFix_Face
 
     trimmed = obj if isinstance(obj, TrimmedSurface) else TrimmedSurface(obj, [])
@@ -117,9 +230,10 @@ def face_of(obj, tolerance: float = TOLERANCE):
         if lo[0] < u0 - slack or hi[0] > u1 + slack or lo[1] < v0 - slack or hi[1] > v1 + slack:
             raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
                               f"(loop bounds {lo.tolist()} to {hi.tolist()})")
+    size = max(_surface_size(trimmed.surface), 1.0)
     wires = []
     for loop in trimmed.loops:
-        edge = _loop_edge(loop, geom)
+        edge = _loop_edge(loop, trimmed.surface, geom, max(tolerance, CURVE_TOLERANCE * size))
         wires.append(BRepBuilderAPI_MakeWire(edge).Wire())
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
@@ -137,9 +251,6 @@ def face_of(obj, tolerance: float = TOLERANCE):
     if not maker.IsDone():
         raise NurbskitError(f"OpenCASCADE could not make a trimmed face (error {maker.Error()})")
     face = maker.Face()
-    size = _surface_size(trimmed.surface)
-    BRepLib.BuildCurves3d_s(face, CURVE_TOLERANCE * max(size, 1.0))
-    BRepLib.SameParameter_s(face, CURVE_TOLERANCE * max(size, 1.0))
     fixer = ShapeFix_Face(face)
     fixer.FixOrientation()  # only if OCC sees a loop the wrong way round (it should not)
     return fixer.Face()
@@ -337,12 +448,13 @@ def _face_surface(face):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
     from OCP.TopoDS import TopoDS
 
+    from OCP.Geom import Geom_RectangularTrimmedSurface
+
     geom = BRep_Tool.Surface_s(face)  # with the face's location applied
-    name = _type_name(geom)
+    basis = geom.BasisSurface() if isinstance(geom, Geom_RectangularTrimmedSurface) else geom
+    name = _type_name(basis)
     bspline = as_bspline_surface(geom)
     if bspline is not None:
-        if name == "RectangularTrimmedSurface":
-            name = "BSplineSurface"
         return bspline, face, name
     converted = TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape())
     bspline = as_bspline_surface(BRep_Tool.Surface_s(converted))
