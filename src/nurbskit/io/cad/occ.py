@@ -9,9 +9,11 @@ Convention:
     are read off the flat vector (no arithmetic on knot values), and a periodic OCC
     spline is unwrapped with OCC's own ``SetNotPeriodic`` (which appends the first ``p``
     poles again and keeps the flat knots, checked in tests/test_io_cad.py). A nurbskit
-    spline whose knots are periodic (``t[i + n'] - t[i]`` constant, ``n' = n - p``) and
+    spline whose knots are periodic (the ``p`` knots at each end are the knots one period
+    ``T = t_n - t_p`` away, ``t[i] = t[i + n - p] - T``, exactly as OCC computes them) and
     whose last ``p`` control points and weights repeat the first ``p`` is written as a
-    periodic OCC spline with ``periodic="auto"`` (the default).
+    periodic OCC spline with ``periodic="auto"`` (the default); otherwise as the plain
+    (unclamped) spline, which is the same geometry.
 
     Coordinates are written as they are (nurbskit works in millimetres, as STEP files
     declare); 2-D control points get ``z = 0``. Parameter domains are never rescaled,
@@ -59,8 +61,7 @@ def knots_and_multiplicities(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return values, counts
 
 
-def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: np.ndarray, axis: int,
-                   rtol: float = 1e-13):
+def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: np.ndarray, axis: int):
     """For an unwrapped periodic spline along ``axis``: (distinct knots, multiplicities) of
     OCC's periodic form, or None when the spline is not periodic."""
     n = points.shape[axis]
@@ -72,7 +73,9 @@ def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: n
     period = t[n] - t[p]
     if not period > 0:
         return None
-    if not np.all(np.abs((t[m:m + 2 * p + 1] - t[: 2 * p + 1]) - period) <= rtol * max(1.0, abs(period), np.abs(t).max())):
+    # exactly the knots OCC derives for a periodic spline (each wrapped knot one period
+    # away, in floating point), so that the spline read back has the same flat knots
+    if not (np.array_equal(t[:p], t[m:m + p] - period) and np.array_equal(t[n + 1:], t[p + 1:2 * p + 1] + period)):
         return None
     take = lambda a, idx: np.take(a, idx, axis=axis)  # noqa: E731
     if not (np.array_equal(take(points, np.arange(m, n)), take(points, np.arange(p)))

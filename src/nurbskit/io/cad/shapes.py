@@ -288,7 +288,7 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeVertex
     from OCP.BRepCheck import BRepCheck_Analyzer
-    from OCP.gp import gp_Pnt
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
     from OCP.TopoDS import TopoDS_Shell, TopoDS_Solid, TopoDS_Wire
 
     v = np.asarray(vertices, dtype=np.float64)
@@ -316,12 +316,15 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     builder = BRep_Builder()
     shell = TopoDS_Shell()
     builder.MakeShell(shell)
-    for a, b, c in f.tolist():
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    for (a, b, c), normal in zip(f.tolist(), normals.tolist()):
         wire = TopoDS_Wire()
         builder.MakeWire(wire)
         for x, y in ((a, b), (b, c), (c, a)):
             builder.Add(wire, edge(x, y))
-        face = BRepBuilderAPI_MakeFace(wire, True).Face()
+        # the plane's normal is the triangle's (counter-clockwise) normal: every face forward, outward
+        plane = gp_Pln(gp_Pnt(*map(float, v[a])), gp_Dir(*normal))
+        face = BRepBuilderAPI_MakeFace(plane, wire, True).Face()
         builder.Add(shell, face)
     # a closed mesh: every edge in exactly two triangles
     undirected = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
