@@ -165,49 +165,73 @@ def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
     return poles, (weights if rational else None), flat, d
 
 
-def _loop_edge(loop: TrimLoop, surface, surface_geom, tolerance: float):
-    """One closed edge on ``surface_geom`` along the loop's (u, v) polyline, with its exact
-    3-D curve (:func:`loop_curve_3d`)."""
+#: (u, v) segments per edge of a trimming loop; 0: one closed edge per loop. Measured on
+#: the benchmark's patches (64 + 32 point loops): one edge per loop builds in 45 ms and
+#: checks in 35 ms per face; 8 segments per edge check in 24 ms but build in 140 ms.
+EDGE_SEGMENTS = 0
+
+
+def _loop_wire(loop: TrimLoop, surface, surface_geom, tolerance: float):
+    """A closed wire on ``surface_geom`` along the loop's (u, v) polyline: one closed edge
+    (or edges of ``EDGE_SEGMENTS`` segments), each with the polyline as its pcurve and the exact 3-D
+    image of it (:func:`loop_curve_3d`) as its curve, sharing vertices."""
     ocp()
     from OCP.BRep import BRep_Builder
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
     from OCP.collections import Array1_gp_Pnt, Array1_gp_Pnt2d
     from OCP.Geom import Geom_BSplineCurve
     from OCP.Geom2d import Geom2d_BSplineCurve
     from OCP.gp import gp_Pnt, gp_Pnt2d
     from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Wire
 
     from .occ import _array1, knots_and_multiplicities
 
     uv = np.vstack([loop.uv, loop.uv[:1]])  # closed: the first point again at the end
     t = _chord_parameters(uv)
-    poles2d = Array1_gp_Pnt2d(1, len(uv))
-    for i, (u, v) in enumerate(uv):
-        poles2d.SetValue(i + 1, gp_Pnt2d(float(u), float(v)))
-    mult = np.ones(len(t), dtype=int)
-    mult[0] = mult[-1] = 2
-    pcurve = Geom2d_BSplineCurve(poles2d, _array1(t, "float"), _array1(mult, "int"), 1, False)
-    poles, weights, flat, degree = loop_curve_3d(surface, uv, t)
-    poles[-1] = poles[0]  # closed exactly
-    knots, mults = knots_and_multiplicities(flat)
-    arr = Array1_gp_Pnt(1, len(poles))
-    for i, (x, y, z) in enumerate(poles.tolist()):
-        arr.SetValue(i + 1, gp_Pnt(x, y, z))
-    if weights is None:
-        curve = Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
-    else:
-        weights[-1] = weights[0]
-        curve = Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"),
-                                  _array1(mults, "int"), degree, False)
-    maker = BRepBuilderAPI_MakeEdge(curve)
-    if not maker.IsDone():
-        raise NurbskitError(f"OpenCASCADE could not make an edge from a trimming loop (error {maker.Error()})")
-    edge = maker.Edge()
+    count = len(uv) - 1
+    pieces = max(1, round(count / EDGE_SEGMENTS)) if EDGE_SEGMENTS else 1
+    cuts = np.unique(np.linspace(0, count, pieces + 1).round().astype(int))
+    corners = _pad3_np(surface.evaluate(torch.from_numpy(uv[cuts[:-1]]).to(surface.dtype)).detach().cpu().double().numpy())
+    vertices = [BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, c))).Vertex() for c in corners]
+    vertices.append(vertices[0])
     builder = BRep_Builder()
-    builder.UpdateEdge(edge, pcurve, surface_geom, TopLoc_Location(), tolerance)
-    builder.SameParameter(edge, True)
-    builder.SameRange(edge, True)
-    return edge
+    wire = TopoDS_Wire()
+    builder.MakeWire(wire)
+    for k, (i0, i1) in enumerate(zip(cuts[:-1], cuts[1:])):
+        part, tp = uv[i0:i1 + 1], t[i0:i1 + 1]
+        poles2d = Array1_gp_Pnt2d(1, len(part))
+        for i, (u, v) in enumerate(part.tolist()):
+            poles2d.SetValue(i + 1, gp_Pnt2d(u, v))
+        mult = np.ones(len(tp), dtype=int)
+        mult[0] = mult[-1] = 2
+        pcurve = Geom2d_BSplineCurve(poles2d, _array1(tp, "float"), _array1(mult, "int"), 1, False)
+        poles, weights, flat, degree = loop_curve_3d(surface, part, tp)
+        poles[0], poles[-1] = corners[k], corners[(k + 1) % len(corners)]  # the shared vertices, exactly
+        knots, mults = knots_and_multiplicities(flat)
+        arr = Array1_gp_Pnt(1, len(poles))
+        for i, (x, y, z) in enumerate(poles.tolist()):
+            arr.SetValue(i + 1, gp_Pnt(x, y, z))
+        if weights is None:
+            curve = Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
+        else:
+            curve = Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"),
+                                      _array1(mults, "int"), degree, False)
+        # one edge for the whole loop: a closed edge, OCC makes its one vertex
+        maker = BRepBuilderAPI_MakeEdge(curve) if len(cuts) == 2 else BRepBuilderAPI_MakeEdge(curve, vertices[k], vertices[k + 1])
+        if not maker.IsDone():
+            raise NurbskitError(f"OpenCASCADE could not make an edge of a trimming loop (error {maker.Error()})")
+        edge = maker.Edge()
+        builder.UpdateEdge(edge, pcurve, surface_geom, TopLoc_Location(), tolerance)
+        builder.SameParameter(edge, True)
+        builder.SameRange(edge, True)
+        builder.Add(wire, edge)
+    wire.Closed(True)
+    return wire
+
+
+def _pad3_np(points: np.ndarray) -> np.ndarray:
+    return points if points.shape[-1] == 3 else np.concatenate([points, np.zeros((len(points), 1))], axis=1)
 
 
 def face_of(obj, tolerance: float = TOLERANCE):
@@ -231,10 +255,8 @@ def face_of(obj, tolerance: float = TOLERANCE):
             raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
                               f"(loop bounds {lo.tolist()} to {hi.tolist()})")
     size = max(_surface_size(trimmed.surface), 1.0)
-    wires = []
-    for loop in trimmed.loops:
-        edge = _loop_edge(loop, trimmed.surface, geom, max(tolerance, CURVE_TOLERANCE * size))
-        wires.append(BRepBuilderAPI_MakeWire(edge).Wire())
+    wires = [_loop_wire(loop, trimmed.surface, geom, max(tolerance, CURVE_TOLERANCE * size))
+             for loop in trimmed.loops]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
         maker = BRepBuilderAPI_MakeFace(geom, tolerance)
