@@ -310,7 +310,7 @@ def _read_json_objects(path: Path) -> list:
         data = json.loads(path.read_bytes())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid JSON ({getattr(exc, 'msg', exc)})") from None
-    if isinstance(data, dict) and data.get("format") == "nurbskit":
+    if isinstance(data, dict) and data.get("format") == "nurbskit" and "kind" in data:
         if data.get("trim"):
             return [TrimmedSurface.from_dict(data, source=str(path))]
         return [from_dict(data, source=str(path))]
@@ -325,6 +325,8 @@ def _read_json_objects(path: Path) -> list:
                     raise InputError(f"{where}: expected a nurbskit surface object")
                 out.append(TrimmedSurface.from_dict(item, source=where) if item.get("trim")
                            else from_dict(item, source=where))
+            for i, item in enumerate(data.get("curves", []) if isinstance(data.get("curves"), list) else []):
+                out.append(from_dict(item, source=f"{path}[curves][{i}]"))
             if not out:
                 raise InputError(f"{path}: '{key}' is empty")
             return out
