@@ -42,9 +42,10 @@ TOLERANCE = 1e-7
 CURVE_TOLERANCE = 1e-9
 #: reading: curved pcurves become polylines within this (u, v) distance (relative to the
 #: face's (u, v) extent) and this turning angle (radians) per segment; a circular hole of
-#: radius 3 in a 64 x 64 face then has about 130 points and loses 0.03 % of its area
-UV_DEFLECTION = 1e-5
-ANGULAR_DEFLECTION = 0.05
+#: radius 3 in a 64 x 64 face then has about 65 points and loses 0.2 % of its area (finer loops
+#: make OCC's reading and checking of the file slower: both grow with the points squared)
+UV_DEFLECTION = 1e-4
+ANGULAR_DEFLECTION = 0.1
 
 
 @dataclass
