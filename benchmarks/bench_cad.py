@@ -204,13 +204,16 @@ def main(argv=None) -> int:
         "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
         "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
         "repeats": args.repeats, "torch_threads": 1,
+        "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
     }
     notes = (f"{len(patches)} trimmed patches (12 x 12 rational bicubic, outer loop 64 points, hole 32). "
              "`written` = shape + write + check (what `write_cad` costs); `read` = file to nurbskit objects. "
              f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop, shape "
              f"{t_shape:.2f} s; OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
              f"poles per loop, {t_approx:.2f} s. `max_error_rel`: largest |S_back - S| on an 11 x 11 grid per "
-             "patch over the patch's diagonal. Peer: OCC's own writer on the same shape (STEP/IGES with 12/9 digits).")
+             "patch over the patch's diagonal. Peer: OCC's own writer on the same shape (STEP/IGES with 12/9 digits). "
+             f"Load average at the end of the run: {meta['load_average_1min']:.1f} on {meta['cpu_count']} cores "
+             "(seconds are inflated by that much contention; ratios within the run are fairer).")
     columns = [("format", "format"), ("written_s", "written (s)"), ("shape_s", "shape (s)"), ("write_s", "write (s)"),
                ("check_s", "check (s)"), ("read_s", "read (s)"), ("occ_default_write_s", "OCC default write (s)"),
                ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("file_mb", "MB"),
