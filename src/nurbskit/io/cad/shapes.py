@@ -243,7 +243,7 @@ def _pad3_np(points: np.ndarray) -> np.ndarray:
 def face_of(obj, tolerance: float = TOLERANCE):
     """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
     ocp()
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
     from OCP.ShapeFix import ShapeFix_Face
 
     trimmed = obj if isinstance(obj, TrimmedSurface) else TrimmedSurface(obj, [])
@@ -265,11 +265,7 @@ def face_of(obj, tolerance: float = TOLERANCE):
              for loop in trimmed.loops]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
-        maker = BRepBuilderAPI_MakeFace(geom, tolerance)
-        face = maker.Face()
-        from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace as MF
-
-        maker = MF(face)
+        maker = BRepBuilderAPI_MakeFace(BRepBuilderAPI_MakeFace(geom, tolerance).Face())
         for w in wires:
             maker.Add(w)
     else:
