@@ -20,7 +20,7 @@ def require_extra(module: str, extra: str = "cad"):
     except ImportError:
         if os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0"):
             pytest.fail(f"NURBSKIT_REQUIRE_EXTRAS is set but {module} (nurbskit[{extra}]) is not installed")
-        pytest.skip(f"{module} is not installed (pip install 'nurbskit[{extra}]')")
+        pytest.skip(f"{module} is not installed (pip install 'nurbskit[{extra}]')", allow_module_level=True)
 
 
 def knots(rng: np.random.Generator, n: int, p: int, kind: str) -> np.ndarray:
