@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.fit_command",
     "nurbskit.cli.volume_command",
     "nurbskit.cli.studio_command",
+    "nurbskit.cli.export_command",
 )
 
 EXIT_BUG = 1

@@ -97,6 +97,10 @@ def describe(path: str | Path, **nurbs_options) -> dict:
 
     path = Path(path)
     formats.check_readable(path)
+    if path.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep", ".brp"):  # CAD files: io/cad
+        from ..io.cad import cad_info
+
+        return cad_info(path)
     if is_nurbs_file(path):
         fmt = nurbs_format(path)
         try:
@@ -154,6 +158,11 @@ def run_info(args) -> int:
     info = describe(args.file, **_nurbs_kwargs(args))
     if args.json:
         sys.stdout.write(json.dumps(info, indent=1) + "\n")
+        return 0
+    if info["kind"] == "cad":
+        from ..io.cad.exchange import format_cad_info
+
+        sys.stdout.write(format_cad_info(info))
         return 0
     lines = [f"{info['file']}", f"  format      {info['format']}", f"  kind        {info['kind']}"]
     if info["kind"] in ("points", "mesh"):

@@ -23,7 +23,8 @@ EXTENSIONS = {
     ".xyz": "text", ".txt": "text", ".csv": "text", ".xyzc": "text", ".pts": "text", ".xyzn": "text",
     ".asc": "text", ".zip": "zip",
 }
-NURBS_EXTENSIONS = (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm", ".weights")
+NURBS_EXTENSIONS = (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm", ".weights",
+                    ".step", ".stp", ".iges", ".igs", ".brep")  # CAD files: nurbskit.io.cad
 MESH_FORMATS = ("ply", "off", "obj", "stl", "npz", "trimesh")
 
 

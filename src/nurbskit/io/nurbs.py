@@ -43,7 +43,8 @@ from ..core.volume import NURBSVolume
 from ..errors import NurbskitError, OptionError
 from ._base import InputError, check_readable, read_bytes
 
-NURBS_FORMATS = ("nurbskit", "geomdl", "ctrlpts", "cptw", "smesh", "3dm")
+NURBS_FORMATS = ("nurbskit", "geomdl", "ctrlpts", "cptw", "smesh", "3dm", "cad")
+_CAD_EXTENSIONS = (".step", ".stp", ".iges", ".igs", ".brep")  # through OpenCASCADE: io/cad
 _KIND_BY_DIM = {1: "curve", 2: "surface", 3: "volume"}
 _CLASSES = {"curve": NURBSCurve, "surface": NURBSSurface, "volume": NURBSVolume}
 _AUTO = "auto"
@@ -59,6 +60,8 @@ def nurbs_format(path: str | os.PathLike, format: str | None = None) -> str:
     ext = path.suffix.lower()
     if ext == ".3dm":
         return "3dm"
+    if ext in _CAD_EXTENSIONS:
+        return "cad"
     if ext == ".json":
         return "json"
     if ext == ".ctrlpts":
@@ -79,7 +82,7 @@ def is_nurbs_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` looks like a NURBS parameter file (by extension and, for JSON, content)."""
     path = Path(path)
     ext = path.suffix.lower()
-    if ext in (".ctrlpts", ".cptw", ".smesh", ".3dm", ".weights"):
+    if ext in (".ctrlpts", ".cptw", ".smesh", ".3dm", ".weights") + _CAD_EXTENSIONS:
         return True
     if ext == ".json":
         return True
@@ -125,6 +128,14 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
         elif fmt == "smesh":
             _no_options(path, options)
             obj = _read_smesh(path)
+        elif fmt == "cad":  # the index-th curve or surface (face surfaces untrimmed) of a STEP/IGES/BREP file
+            _no_options(path, options)
+            from .cad import read_objects
+
+            found = [o.surface if hasattr(o, "loops") else o for o in read_objects(path)]
+            if not -len(found) <= index < len(found):
+                raise OptionError(f"{path}: index {index} is out of range; the file holds {len(found)} curves/surfaces")
+            obj = found[index]
         else:
             _no_options(path, options)
             from .cad import read_3dm
@@ -427,7 +438,7 @@ def write_nurbs(path: str | os.PathLike, obj: TensorSpline, *, format: str | Non
         raise OptionError(f"{path}: is a directory, expected a file name")
     ext = path.suffix.lower()
     fmt = format or {".json": "nurbskit", ".ctrlpts": "ctrlpts", ".cptw": "cptw", ".smesh": "smesh",
-                     ".dat": "smesh", ".3dm": "3dm"}.get(ext)
+                     ".dat": "smesh", ".3dm": "3dm", **dict.fromkeys(_CAD_EXTENSIONS, "cad")}.get(ext)
     if fmt not in NURBS_FORMATS:
         raise OptionError(
             f"{path}: cannot write NURBS as {ext or '(no extension)'!r}; use .json, .ctrlpts, .cptw, .smesh/.dat or .3dm"
@@ -443,6 +454,11 @@ def write_nurbs(path: str | os.PathLike, obj: TensorSpline, *, format: str | Non
         from .cad import write_3dm
 
         write_3dm(path, obj)
+        return [path]
+    if fmt == "cad":
+        from .cad import write_cad
+
+        write_cad(obj, path)
         return [path]
     if fmt == "smesh":
         return [_write_smesh(path, obj)]

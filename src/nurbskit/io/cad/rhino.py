@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._fs import atomic_path
-from .._optional import require
-from ..core.curve import NURBSCurve
-from ..core.spline import TensorSpline
-from ..core.surface import NURBSSurface
-from ..errors import OptionError
-from ._base import InputError
+from ..._fs import atomic_path
+from ..._optional import require
+from ...core.curve import NURBSCurve
+from ...core.spline import TensorSpline
+from ...core.surface import NURBSSurface
+from ...errors import OptionError
+from .._base import InputError
 
 
 def _rhino():
@@ -85,6 +85,20 @@ def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
     """Write one curve or surface (in 2-D or 3-D) to a ``.3dm`` file, atomically."""
     rh = _rhino()
     path = Path(path)
+    model = rh.File3dm()
+    geo = _geometry(path, obj)
+    if obj.kind == "curve":
+        model.Objects.AddCurve(geo)
+    else:
+        model.Objects.AddSurface(geo)
+    with atomic_path(path) as tmp:
+        if not model.Write(str(tmp), 7):
+            raise OSError(f"rhino3dm could not write {path}")
+
+
+def _geometry(path: Path, obj: TensorSpline):
+    """An openNURBS curve or surface equal to ``obj`` (checked valid by rhino3dm)."""
+    rh = _rhino()
     if obj.kind not in ("curve", "surface"):
         raise OptionError(f"{path}: .3dm holds curves and surfaces; got a {obj.kind}")
     if obj.dim not in (2, 3):
@@ -94,8 +108,7 @@ def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
         cp = np.concatenate([cp, np.zeros(cp.shape[:-1] + (1,))], axis=-1)
     w = obj.weights.detach().cpu().double().numpy()
     kvs = [kv.detach().cpu().double().numpy() for kv in obj.knot_vectors]
-    rational = bool(obj.is_rational) or not np.allclose(w, 1.0)
-    model = rh.File3dm()
+    rational = bool(obj.is_rational) or not np.allclose(w, 1.0, rtol=0, atol=0)
     if obj.kind == "curve":
         n, p = obj.sizes[0], obj.degrees[0]
         geo = rh.NurbsCurve(3, rational, p + 1, n)
@@ -104,7 +117,6 @@ def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
             geo.Points[i] = rh.Point4d(x, y, z, w[i]) if rational else rh.Point4d(*cp[i], 1.0)
         for i, k in enumerate(kvs[0][1:-1]):
             geo.Knots[i] = float(k)
-        model.Objects.AddCurve(geo)
     else:
         (nu, nv), (p, q) = obj.sizes, obj.degrees
         geo = rh.NurbsSurface.Create(3, rational, p + 1, q + 1, nu, nv)
@@ -116,9 +128,44 @@ def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
             geo.KnotsU[i] = float(k)
         for i, k in enumerate(kvs[1][1:-1]):
             geo.KnotsV[i] = float(k)
-        model.Objects.AddSurface(geo)
     if not geo.IsValid:
         raise OptionError(f"{path}: rhino3dm rejects this {obj.kind} as invalid (check knots and weights)")
+    return geo
+
+
+def read_3dm_all(path: str | os.PathLike) -> list[TensorSpline]:
+    """Every NURBS curve and surface of a ``.3dm`` file, in the file's order."""
+    rh = _rhino()
+    path = Path(path)
+    model = rh.File3dm.Read(str(path))
+    if model is None:
+        raise InputError(f"{path}: rhino3dm could not read it as a .3dm file")
+    count = sum(1 for o in model.Objects if _geometry_of(o) is not None)
+    if count == 0:
+        raise InputError(f"{path}: holds no NURBS curve or surface")
+    return [read_3dm(path, index=i) for i in range(count)]
+
+
+def write_3dm_objects(path: str | os.PathLike, objects) -> list[str]:
+    """Write several curves and surfaces (trimmed surfaces: their surface) to one ``.3dm``
+    file, atomically. Returns what the file cannot hold (``['trimming loops']`` when a
+    trimmed surface was given: rhino3dm offers no way to build trimmed faces)."""
+    from ...core.trim import TrimmedSurface
+
+    rh = _rhino()
+    path = Path(path)
+    model = rh.File3dm()
+    left_out = []
+    for obj in objects:
+        if isinstance(obj, TrimmedSurface):
+            if obj.loops and "trimming loops" not in left_out:
+                left_out.append("trimming loops")
+            obj = obj.surface
+        if not isinstance(obj, TensorSpline):
+            raise OptionError(f"{path}: .3dm holds curves and surfaces; got a {type(obj).__name__}")
+        geo = _geometry(path, obj)
+        (model.Objects.AddCurve if obj.kind == "curve" else model.Objects.AddSurface)(geo)
     with atomic_path(path) as tmp:
         if not model.Write(str(tmp), 7):
             raise OSError(f"rhino3dm could not write {path}")
+    return left_out

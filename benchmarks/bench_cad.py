@@ -1,0 +1,227 @@
+"""How long do 100 trimmed patches take to write to STEP / IGES / BREP and to read back?
+
+Question: are 100 trimmed patches of 12 x 12 control points written in <= 2 s (issue 12),
+every file valid for OpenCASCADE's checker, and what do reading and the built-in check cost?
+
+Method: 100 bicubic rational patches of 12 x 12 control points (a 10 x 10 arrangement of
+wavy height fields, 10 mm apart, seed 0), each trimmed by an outer loop of 64 points and a
+hole of 32 points (a trimmed patch as ``nurbskit patches`` writes it). Per format, each
+stage once to warm up, then the median of ``--repeats`` runs:
+
+- ``shape``: nurbskit objects to one OCC compound (faces with exact trimming curves);
+- ``write``: OCC's translator and the 17-digit text writer (BREP: ``BRepTools::Write``);
+- ``check``: the built-in check (file read back with OCC, ``BRepCheck_Analyzer``);
+- ``written``: shape + write + check, what ``write_cad`` costs;
+- ``read``: ``read_cad``, the file to 100 TrimmedSurface objects.
+
+Peers in the same process: OCC's own STEP/IGES writer (``STEPControl_Writer::Write``,
+12 decimals) on the same shape (ratio ``write / peer``), and the same faces with OCC's
+approximated 3-D trimming curves (``BRepLib::BuildCurves3d``) instead of our exact ones
+(poles per loop and shape time). Load-independent numbers: file size, faces, edges,
+poles of the 3-D trimming curves, validity, largest round-trip error at 11 x 11 (u, v)
+per patch (relative to the patch's diagonal). One torch thread (the evaluations are
+small). Other processes may share the two cores: seconds can be contended.
+
+Run: ``python benchmarks/bench_cad.py [--repeats 3] [--patches 100]``; writes
+``benchmarks/results/cad.json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "src"))
+
+from _harness import write_results  # noqa: E402
+
+import nurbskit  # noqa: E402
+from nurbskit.core.trim import TrimLoop, TrimmedSurface  # noqa: E402
+
+
+def make_patches(count: int, size: int = 12, seed: int = 0) -> list[TrimmedSurface]:
+    rng = np.random.default_rng(seed)
+    patches = []
+    th_outer = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    th_hole = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    for k in range(count):
+        x, y = np.meshgrid(np.linspace(0, 10, size), np.linspace(0, 10, size), indexing="ij")
+        z = 0.8 * np.sin(x / 2 + k) * np.cos(y / 3) + rng.normal(0, 0.1, x.shape)
+        cp = np.stack([x + 12 * (k % 10), y + 12 * (k // 10), z], axis=-1)
+        w = rng.uniform(0.8, 1.25, (size, size))
+        s = nurbskit.NURBSSurface(torch.tensor(cp), (3, 3), None, torch.tensor(w))
+        r = 0.42 + 0.04 * np.sin(5 * th_outer)
+        outer = TrimLoop.from_uv(np.stack([0.5 + r * np.cos(th_outer), 0.5 + r * np.sin(th_outer)], 1))
+        hole = TrimLoop(np.stack([0.45 + 0.12 * np.cos(th_hole), 0.5 + 0.12 * np.sin(th_hole)], 1), "hole")
+        patches.append(TrimmedSurface(s, [outer, hole]))
+    return patches
+
+
+def median_time(fn, repeats: int):
+    result = fn()  # warm-up
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), result
+
+
+def occ_default_write(shape, path: Path, fmt: str) -> None:
+    """OCC's own writers as they come (the peer)."""
+    if fmt == "step":
+        from OCP.STEPControl import STEPControl_StepModelType, STEPControl_Writer
+
+        w = STEPControl_Writer()
+        w.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
+        w.Write(str(path))
+    elif fmt == "iges":
+        from OCP.IGESControl import IGESControl_Writer
+
+        w = IGESControl_Writer("MM", 0)
+        w.AddShape(shape)
+        w.ComputeModel()
+        w.Write(str(path))
+    else:
+        from OCP.BRepTools import BRepTools
+
+        BRepTools.Write_s(shape, str(path))
+
+
+def approximated_faces(patches):
+    """The same faces with OCC's approximated 3-D trimming curves (BRepLib::BuildCurves3d)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepLib import BRepLib
+    from OCP.collections import Array1_gp_Pnt2d
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.gp import gp_Pnt2d
+
+    from nurbskit.io.cad.occ import _array1, surface_to_occ
+    from nurbskit.io.cad.shapes import _chord_parameters
+
+    faces = []
+    for p in patches:
+        geom = surface_to_occ(p.surface)
+        wires = []
+        for loop in p.loops:
+            uv = np.vstack([loop.uv, loop.uv[:1]])
+            t = _chord_parameters(uv)
+            poles = Array1_gp_Pnt2d(1, len(uv))
+            for i, (u, v) in enumerate(uv):
+                poles.SetValue(i + 1, gp_Pnt2d(float(u), float(v)))
+            mult = np.ones(len(t), dtype=int)
+            mult[0] = mult[-1] = 2
+            pc = Geom2d_BSplineCurve(poles, _array1(t, "float"), _array1(mult, "int"), 1, False)
+            wires.append(BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(pc, geom).Edge()).Wire())
+        maker = BRepBuilderAPI_MakeFace(geom, wires[0], True)
+        for w in wires[1:]:
+            maker.Add(w)
+        face = maker.Face()
+        BRepLib.BuildCurves3d_s(face, 1e-7 * 15)
+        faces.append(face)
+    return faces
+
+
+def curve_poles(shape) -> list[int]:
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out = []
+    exp = TopExp_Explorer(shape, TopAbs_EDGE)
+    while exp.More():
+        curve = BRep_Tool.Curve_s(TopoDS.Edge(exp.Current()), 0.0, 1.0)
+        out.append(curve.NbPoles() if hasattr(curve, "NbPoles") else 0)
+        exp.Next()
+    return out
+
+
+def max_error(patches, model) -> float:
+    worst = 0.0
+    for p, back in zip(patches, model.faces):
+        s = p.surface
+        (u0, u1), (v0, v1) = s.domain
+        uv = np.stack(np.meshgrid(np.linspace(u0, u1, 11), np.linspace(v0, v1, 11), indexing="ij"), -1).reshape(-1, 2)
+        uv = torch.tensor(uv)
+        cp = s.control_points.reshape(-1, 3)
+        diag = float((cp.max(0).values - cp.min(0).values).norm())
+        worst = max(worst, float((back.surface.evaluate(uv) - s.evaluate(uv)).norm(dim=-1).max()) / diag)
+    return worst
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--patches", type=int, default=100)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+
+    from nurbskit.io.cad import read_cad
+    from nurbskit.io.cad.exchange import _quiet, read_shape, write_shape
+    from nurbskit.io.cad.shapes import check_shape, to_shape
+
+    _quiet()
+    patches = make_patches(args.patches)
+    t_shape, shape = median_time(lambda: to_shape(patches, sew_tolerance=None), args.repeats)
+    t_approx, approx = median_time(lambda: approximated_faces(patches), args.repeats)
+    exact_poles, approx_poles = curve_poles(shape), [n for f in approx for n in curve_poles(f)]
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench-cad-") as tmp:
+        for fmt in ("step", "iges", "brep"):
+            path = Path(tmp) / f"patches.{fmt}"
+            t_write, _ = median_time(lambda: write_shape(shape, path, check=False), args.repeats)
+            t_check, report = median_time(lambda: check_shape(read_shape(path)), args.repeats)
+            t_read, model = median_time(lambda: read_cad(path), args.repeats)
+            peer = Path(tmp) / f"peer.{fmt}"
+            t_peer, _ = median_time(lambda: occ_default_write(shape, peer, fmt), args.repeats)
+            rows.append({
+                "format": fmt, "patches": len(patches), "shape_s": t_shape, "write_s": t_write, "check_s": t_check,
+                "written_s": t_shape + t_write + t_check, "read_s": t_read,
+                "occ_default_write_s": t_peer, "write_vs_occ_default": t_write / t_peer,
+                "valid": report["valid"], "faces_read": len(model.faces), "edges": report["edges"],
+                "holes_read": sum(len(f.holes) for f in model.faces),
+                "file_mb": path.stat().st_size / 1e6, "occ_default_file_mb": peer.stat().st_size / 1e6,
+                "max_error_rel": max_error(patches, model),
+            })
+            print(f"{fmt}: written {rows[-1]['written_s']:.2f} s (shape {t_shape:.2f}, write {t_write:.2f}, "
+                  f"check {t_check:.2f}), read {t_read:.2f} s, valid {report['valid']}", file=sys.stderr)
+    meta = {
+        "patches": len(patches), "control_points": "12 x 12, bicubic, rational", "loop_points": [64, 32],
+        "exact_curve_poles_per_loop": float(np.mean(exact_poles)),
+        "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
+        "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
+        "repeats": args.repeats, "torch_threads": 1,
+        "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
+    }
+    notes = (f"{len(patches)} trimmed patches (12 x 12 rational bicubic, outer loop 64 points, hole 32). "
+             "`written` = shape + write + check (what `write_cad` costs); `read` = file to nurbskit objects. "
+             f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop, shape "
+             f"{t_shape:.2f} s; OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
+             f"poles per loop, {t_approx:.2f} s. `max_error_rel`: largest |S_back - S| on an 11 x 11 grid per "
+             "patch over the patch's diagonal. Peer: OCC's own writer on the same shape (STEP/IGES with 12/9 digits). "
+             f"Load average at the end of the run: {meta['load_average_1min']:.1f} on {meta['cpu_count']} cores "
+             "(seconds are inflated by that much contention; ratios within the run are fairer).")
+    columns = [("format", "format"), ("written_s", "written (s)"), ("shape_s", "shape (s)"), ("write_s", "write (s)"),
+               ("check_s", "check (s)"), ("read_s", "read (s)"), ("occ_default_write_s", "OCC default write (s)"),
+               ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("file_mb", "MB"),
+               ("occ_default_file_mb", "OCC default MB"), ("max_error_rel", "max error / diag")]
+    path = write_results("cad", rows, columns, meta=meta, title="CAD exchange: 100 trimmed patches", notes=notes)
+    print(path.read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,104 @@
+"""``nurbskit export INPUT OUTPUT``: NURBS geometry to CAD files and meshes.
+
+Examples::
+
+    nurbskit export fit/surface.json surface.step        # read back and checked by OpenCASCADE
+    nurbskit export patches/patches.json model.iges      # trimmed patches: trimmed surfaces (IGES 144)
+    nurbskit export part.step part.json                  # every face: {"surfaces": [...]} with its trim
+    nurbskit export part.step part.stl --tolerance 0.01  # tessellated (OBJ, PLY, STL, glTF, GLB, OFF)
+    nurbskit export vol/mesh.obj vol.step                # a closed mesh: a solid of triangles
+
+Inputs: nurbskit JSON (one object, ``{"patches": [...]}`` or ``{"surfaces": [...]}``),
+``.3dm``, STEP, IGES, BREP, the other NURBS files of ``nurbskit convert``, and triangle
+meshes (to CAD formats, as a triangulated solid). Outputs: by OUTPUT's extension or
+``--format``. STEP, IGES and BREP need the ``[cad]`` extra (OpenCASCADE), ``.3dm`` too
+(rhino3dm).
+
+For the ``fit``, ``patches`` and ``volume`` commands: :func:`add_format_option` adds
+``--format``, and :func:`write_result` writes their result in that format.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from ..errors import OptionError
+
+FORMAT_CHOICES = ("step", "iges", "brep", "3dm", "obj", "ply", "stl", "gltf")
+_MESH_INPUTS = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export", help="write NURBS geometry as STEP, IGES, BREP, .3dm, JSON or a mesh",
+        description="Read INPUT (nurbskit JSON or a patch set, .3dm, STEP, IGES, BREP, another NURBS file, "
+                    "or a triangle mesh) and write OUTPUT in the format of its extension or --format: "
+                    "CAD files (.step/.stp, .iges/.igs, .brep: read back and checked by OpenCASCADE), "
+                    ".3dm, nurbskit .json, or a tessellation (.obj, .ply, .stl, .gltf, .glb, .off).")
+    p.add_argument("input", metavar="INPUT", help="file to read")
+    p.add_argument("output", metavar="OUTPUT", help="file to write")
+    p.add_argument("--format", choices=FORMAT_CHOICES + ("json", "glb", "off"), default=None,
+                   help="output format (default: OUTPUT's extension)")
+    p.add_argument("--tolerance", type=float, default=None,
+                   help="tessellation: largest distance from a triangle to the surface, in model units "
+                        "(default 1e-3 of the bounding-box diagonal)")
+    p.add_argument("--no-check", action="store_true",
+                   help="CAD files: do not read the file back and check it (not recommended)")
+    p.set_defaults(run=run_export)
+
+
+def add_format_option(parser) -> None:
+    """``--format step|iges|brep|3dm|obj|ply|stl|gltf`` and ``--tolerance`` for a result command."""
+    parser.add_argument("--format", dest="export_format", choices=FORMAT_CHOICES, default=None,
+                        help="also write the result in this format (CAD files are read back and checked)")
+    parser.add_argument("--tolerance", dest="export_tolerance", type=float, default=None,
+                        help="with --format obj/ply/stl/gltf: tessellation tolerance in model units "
+                             "(default 1e-3 of the bounding-box diagonal)")
+
+
+def write_result(obj, path, format: str | None = None, tolerance: float | None = None, **kwargs) -> dict:
+    """Write a result in any format (see :func:`nurbskit.io.cad.write_result`)."""
+    from ..io.cad import write_result as _write
+
+    if tolerance is not None and not tolerance > 0:
+        raise OptionError(f"--tolerance must be positive, got {tolerance}")
+    return _write(obj, path, format=format, tolerance=tolerance, **kwargs)
+
+
+def _read_input(path: Path) -> list:
+    from ..io.cad import read_objects
+    from ..io.nurbs import is_nurbs_file
+
+    ext = path.suffix.lower()
+    if ext in _MESH_INPUTS and not is_nurbs_file(path):
+        from ..io.mesh import read_mesh
+
+        mesh = read_mesh(path)
+        return [mesh]
+    return read_objects(path)
+
+
+def run_export(args) -> int:
+    from ..io._base import check_readable
+
+    src, out = check_readable(args.input), Path(args.output)
+    if out.is_dir():
+        raise OptionError(f"{out}: is a directory, expected an output file name")
+    if args.tolerance is not None and not args.tolerance > 0:
+        raise OptionError(f"--tolerance must be positive, got {args.tolerance}")
+    objects = _read_input(src)
+    report = write_result(objects, out, format=args.format, tolerance=args.tolerance, check=not args.no_check)
+    parts = [f"wrote {out} ({report['format']}"]
+    if "faces" in report:
+        parts.append(f", {report['faces']} faces, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")
+    if "triangles" in report:
+        parts.append(f", {report['triangles']:,} triangles")
+    sys.stderr.write("nurbskit export: " + "".join(parts) + ")\n")
+    if report.get("left_out"):
+        sys.stderr.write(f"nurbskit export: note: {out.suffix} cannot store {', '.join(report['left_out'])}; "
+                         f"left out of {out}\n")
+    return 0
+
+
+__all__ = ["register", "run_export", "add_format_option", "write_result", "FORMAT_CHOICES"]
