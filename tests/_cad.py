@@ -3,24 +3,17 @@ kind of knot vector (clamped, unclamped, periodic)."""
 
 from __future__ import annotations
 
-import importlib
-import os
-
 import numpy as np
 import pytest
 import torch
 
+import _extras
 from nurbskit import NURBSCurve, NURBSSurface
 
 
 def require_extra(module: str, extra: str = "cad"):
-    """Import ``module``; skip without it, but FAIL when NURBSKIT_REQUIRE_EXTRAS=1 (CI)."""
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        if os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0"):
-            pytest.fail(f"NURBSKIT_REQUIRE_EXTRAS is set but {module} (nurbskit[{extra}]) is not installed")
-        pytest.skip(f"{module} is not installed (pip install 'nurbskit[{extra}]')", allow_module_level=True)
+    """Import ``module``; skip the test module without it, but FAIL when NURBSKIT_REQUIRE_EXTRAS=1 (CI)."""
+    return _extras.require_extra(module, extra, module_level=True)
 
 
 def knots(rng: np.random.Generator, n: int, p: int, kind: str) -> np.ndarray:

@@ -19,12 +19,17 @@ def extras_required() -> bool:
     return os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0")
 
 
-def require_extra(module: str, extra: str):
-    """Import ``module``; without it, fail under NURBSKIT_REQUIRE_EXTRAS=1, skip otherwise."""
+def require_extra(module: str, extra: str, *, module_level: bool = False):
+    """Import ``module``; without it, fail under NURBSKIT_REQUIRE_EXTRAS=1, skip otherwise
+    (the whole test module with ``module_level=True``)."""
     try:
         return importlib.import_module(module)
     except ImportError:
-        message = f"needs the optional package {module!r} (pip install 'nurbskit[{extra}]')"
-        if extras_required():
-            pytest.fail(f"NURBSKIT_REQUIRE_EXTRAS is set but {message}")
-        pytest.skip(message)
+        missing(f"needs the optional package {module!r} (pip install 'nurbskit[{extra}]')", module_level)
+
+
+def missing(message: str, module_level: bool = False):
+    """Fail under NURBSKIT_REQUIRE_EXTRAS=1, skip (with ``message``) otherwise."""
+    if extras_required():
+        pytest.fail(f"NURBSKIT_REQUIRE_EXTRAS is set but {message}")
+    pytest.skip(message, allow_module_level=module_level)

@@ -217,9 +217,24 @@ def test_add_format_option_and_write_result_for_result_commands(tmp_path):
 
     parser = argparse.ArgumentParser()
     add_format_option(parser)
-    args = parser.parse_args(["--format", "step", "--tolerance", "0.5"])
+    args = parser.parse_args(["--format", "step", "--mesh-tolerance", "0.5"])
     assert args.export_format == "step" and args.export_tolerance == 0.5
     report = write_result(_surface(), tmp_path / "surface.out", format=args.export_format)
     assert report["valid"] and report["format"] == "step"
     with pytest.raises(SystemExit):
         parser.parse_args(["--format", "dxf"])
+
+
+def test_fit_and_volume_write_cad_formats(tmp_path):
+    """`--format` on the result commands: the fitted surface as STEP, read back to the same surface."""
+    rng = np.random.default_rng(0)
+    uv = rng.random((400, 2))
+    pts = np.c_[uv, 0.1 * np.sin(3 * uv[:, 0]) * uv[:, 1]]
+    np.savetxt(tmp_path / "c.xyz", pts)
+    out = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "c.xyz"), "--ctrl", "6x6", "--iters", "3", "--resolution", "16x16",
+                 "--no-figures", "--quiet", "--out", str(out), "--format", "step"]) == 0
+    back = read_nurbs(out / "surface.step")
+    ours = read_nurbs(out / "surface.json")
+    grid = torch.rand(50, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    assert_close(back.evaluate(grid), ours.evaluate(grid), atol=1e-12)

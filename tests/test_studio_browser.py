@@ -36,10 +36,7 @@ VIEWPORT = {"width": 1000, "height": 700}
 SHOTS = os.environ.get("NURBSKIT_STUDIO_SHOTS")  # a folder: save a screenshot of every tab there
 
 
-def _missing(reason: str):
-    if os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0"):
-        pytest.fail(f"NURBSKIT_REQUIRE_EXTRAS is set but {reason}")
-    pytest.skip(reason)
+from _extras import missing as _missing
 
 
 @pytest.fixture(scope="module")

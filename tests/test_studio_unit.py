@@ -174,12 +174,9 @@ def test_command_serves_the_page(tmp_path):
     import time
     import urllib.request
 
-    try:
-        import viser  # noqa: F401
-    except ImportError:
-        if os.environ.get("NURBSKIT_REQUIRE_EXTRAS", "") not in ("", "0"):
-            pytest.fail("NURBSKIT_REQUIRE_EXTRAS is set but viser is missing")
-        pytest.skip("viser is not installed")
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     proc = subprocess.Popen([sys.executable, "-m", "nurbskit", "studio", "--port", "0", "--workdir", str(tmp_path)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)

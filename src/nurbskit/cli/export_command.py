@@ -15,7 +15,7 @@ meshes (to CAD formats, as a triangulated solid). Outputs: by OUTPUT's extension
 (rhino3dm).
 
 For the ``fit``, ``patches`` and ``volume`` commands: :func:`add_format_option` adds
-``--format``, and :func:`write_result` writes their result in that format.
+``--format`` and ``--mesh-tolerance``, and :func:`write_result` writes their result in that format.
 """
 
 from __future__ import annotations
@@ -49,10 +49,11 @@ def register(subparsers) -> None:
 
 
 def add_format_option(parser) -> None:
-    """``--format step|iges|brep|3dm|obj|ply|stl|gltf`` and ``--tolerance`` for a result command."""
+    """``--format step|iges|brep|3dm|obj|ply|stl|gltf`` and ``--mesh-tolerance`` for a result command
+    (not ``--tolerance``: the fitting commands use that name for their stopping rule)."""
     parser.add_argument("--format", dest="export_format", choices=FORMAT_CHOICES, default=None,
                         help="also write the result in this format (CAD files are read back and checked)")
-    parser.add_argument("--tolerance", dest="export_tolerance", type=float, default=None,
+    parser.add_argument("--mesh-tolerance", dest="export_tolerance", type=float, default=None,
                         help="with --format obj/ply/stl/gltf: tessellation tolerance in model units "
                              "(default 1e-3 of the bounding-box diagonal)")
 

@@ -283,7 +283,7 @@ class ExportPanel:
             raise OptionError("nothing to export as NURBS yet; load, fit or create an object first")
         obj = obj.detach()
         if fmt in self.cad:
-            self.cad[fmt][1](path, obj)
+            self.cad[fmt][1](obj, path)  # write_cad: the format from the extension; read back and checked
         elif fmt == "geomdl JSON":
             nurbskit.io.write_nurbs(path, obj, format="geomdl")
         else:

@@ -64,8 +64,9 @@ def available_tabs() -> list[TabSpec]:
 
 # Export formats beyond nurbskit's own: (label, extension, module, writer attribute).
 CAD_WRITERS = (
-    ("STEP", ".step", "nurbskit.io.cad", "write_step"),
-    ("IGES", ".iges", "nurbskit.io.cad", "write_iges"),
+    ("STEP", ".step", "nurbskit.io.cad", "write_cad"),
+    ("IGES", ".iges", "nurbskit.io.cad", "write_cad"),
+    ("BREP", ".brep", "nurbskit.io.cad", "write_cad"),
 )
 
 
