@@ -1,0 +1,139 @@
+"""One NURBS patch for a set of points, with the project's own fitting, and its inliers.
+
+:func:`fit_patch` runs :func:`nurbskit.fit.fit_surface` (least-squares start on the best
+plane or, where the points wrap around, cylinder parametrisation; then alternating
+projection + least squares and the ``default`` refinement of control points, weights and
+knots, shortened), on a seeded subset of the points. The control grid starts at
+``min_ctrl`` and grows (x 1.5) while too few points lie within ``eps / 2`` of the patch, up
+to ``max_ctrl``: a patch gets the control points its shape needs (the paper fixes 4 x 4).
+Where the points wrap around (:func:`nurbskit.fit.looks_closed`) the patch is closed in v
+with a periodic seam (the paper's patches are open only).
+
+:func:`point_distances` gives TRUE point-to-surface distances by Newton projection
+(:func:`nurbskit.core.project.project_points`), not distances to the nearest of a grid of
+samples, and :func:`bend_radii` the smallest radius of curvature at given parameters (used
+to refuse a patch that rounds a sharp crease).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..core import NURBSSurface
+from ..core.project import project_points
+from ..fit import fit_surface, get_pipeline, looks_closed
+from ..fit.init import plane_sheet
+
+
+@dataclass
+class PatchFit:
+    """A fitted patch and where the points it was fitted to fall on it."""
+
+    surface: NURBSSurface
+    closed: bool
+    params: np.ndarray
+    """``(M, 2)`` foot-point parameters of the points."""
+    distance: np.ndarray
+    """``(M,)`` point-to-surface distances (input units)."""
+    ctrl: tuple[int, int]
+    fits: int = 1
+
+
+def point_distances(surface: NURBSSurface, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``."""
+    if len(points) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    with torch.no_grad():
+        proj = project_points(surface.detach(), torch.as_tensor(points, dtype=surface.dtype, device=surface.device))
+    return proj.params.cpu().double().numpy(), proj.distance.cpu().double().numpy()
+
+
+def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
+    """Smallest radius of curvature ``1 / max |k_i|`` at ``params (M, 2)`` -> ``(M,)``.
+
+    Principal curvatures from the first and second fundamental forms (do Carmo, section
+    3-3): ``k`` solves ``det(II - k I) = 0``.
+    """
+    if len(params) == 0:
+        return np.zeros(0)
+    with torch.no_grad():
+        d = surface.detach().derivatives(torch.as_tensor(params, dtype=surface.dtype, device=surface.device), order=2)
+    d = d.cpu().double().numpy()
+    su, sv = d[:, 1, 0], d[:, 0, 1]
+    suu, suv, svv = d[:, 2, 0], d[:, 1, 1], d[:, 0, 2]
+    n = np.cross(su, sv)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    E, F, G = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+    L, M, N = (suu * n).sum(1), (suv * n).sum(1), (svv * n).sum(1)
+    det = np.maximum(E * G - F * F, 1e-300)
+    H = (E * N - 2 * F * M + G * L) / (2 * det)
+    K = (L * N - M * M) / det
+    kmax = np.abs(H) + np.sqrt(np.maximum(H * H - K, 0.0))
+    return 1.0 / np.maximum(kmax, 1e-300)
+
+
+def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
+    """A flat patch on the best-fitting plane of ``points``, over their bounding rectangle."""
+    surface, _ = plane_sheet(torch.as_tensor(points, dtype=torch.float64), (ctrl, ctrl), (degree, degree))
+    return surface
+
+
+def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg) -> NURBSSurface:
+    base = get_pipeline("default")
+    fit_cfg = dataclasses.replace(
+        base,
+        ctrl=ctrl,
+        degree=(cfg.degree, cfg.degree),
+        init=dataclasses.replace(base.init, closed="v" if closed else "open"),
+        alternation=dataclasses.replace(base.alternation, rounds=cfg.fit_rounds),
+        max_points=0,
+        seed=cfg.seed,
+        device=cfg.device,
+    ).with_iters(cfg.fit_iters)
+    return fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg).surface.to(device="cpu")
+
+
+def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
+    """Fit one patch to ``points (M, 3)`` (input units; ``eps`` the inlier tolerance there).
+
+    ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. Returns the patch with
+    every point's foot parameters and true distance.
+    """
+    rng = rng or np.random.default_rng(cfg.seed)
+    sub = points if len(points) <= cfg.fit_points else points[rng.choice(len(points), cfg.fit_points, replace=False)]
+    q = cfg.degree
+    closed = bool(looks_closed(torch.as_tensor(sub)))
+    n_u = cfg.min_ctrl
+    n_v = max(cfg.min_ctrl, 2 * q + 2) if closed else cfg.min_ctrl
+    if closed and 2 * q + 1 > cfg.max_ctrl:
+        closed, n_v = False, cfg.min_ctrl
+    best = None
+    fits = 0
+    while True:
+        surface = _fit_once(sub, (n_u, n_v), closed, cfg)
+        fits += 1
+        params, dist = point_distances(surface, points)
+        good = float(np.mean(dist < eps / 2))
+        if best is None or good > best[0] + 0.005:
+            best = (good, surface, params, dist, (n_u, n_v))
+        else:
+            break  # a larger grid no longer helps
+        if good >= 0.95 or (n_u >= cfg.max_ctrl and n_v >= cfg.max_ctrl):
+            break
+        n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
+        n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
+    _, surface, params, dist, ctrl = best
+    return PatchFit(surface, closed, params, dist, ctrl, fits)
+
+
+def crease_fraction(surface: NURBSSurface, params: np.ndarray, min_radius: float, limit: int = 4000) -> float:
+    """Fraction of the given foot points where the patch bends tighter than ``min_radius``."""
+    if len(params) == 0:
+        return 0.0
+    if len(params) > limit:
+        params = params[np.linspace(0, len(params) - 1, limit).astype(int)]
+    return float(np.mean(bend_radii(surface, params) < min_radius))
