@@ -42,11 +42,15 @@ class PatchConfig:
         3.0, "a merged patch may not bend tighter than this many eps on more than crease_fraction of its inliers"
     )
     crease_fraction: float = _f(0.01, "fraction of inliers allowed on a tighter bend than min_radius (a sharp crease)")
-    fit_points: int = _f(1500, "fit each candidate patch on at most this many of its points (seeded subset)")
-    fit_iters: int = _f(15, "refinement iterations of each candidate fit (the fit's default stage, shortened)")
-    fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
+    fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
+    fit_rounds: int = _f(15, "alternating projection + least-squares rounds of each candidate fit")
+    fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
+    final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
+    final_points: int = _f(2000, "fit each final patch on at most this many of its inliers")
     max_quadric_error: float = _f(
-        25.0, "skip merges whose Taubin quadric error exceeds this many eps^2 (0: never skip)"
+        1.0,
+        "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "
+        "this many eps^2 (0: never skip); the paper's optional cut, here on by default: it keeps a cap off a tube",
     )
     seed: int = _f(0, "seed of every random subset")
     device: str = _f("cpu", "torch device of the fits: cpu or cuda")
@@ -67,7 +71,7 @@ class PatchConfig:
         for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction"):
             if not getattr(self, name) > 0:
                 raise OptionError(f"{name}: expected a positive number, got {getattr(self, name)!r}")
-        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("min_region", 0)):
+        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0)):
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")

@@ -25,7 +25,7 @@ import torch
 
 from ..core import NURBSSurface
 from ..core.project import project_points
-from ..fit import fit_surface, get_pipeline, looks_closed
+from ..fit import Topology, alternate, fit_surface, get_pipeline, looks_closed
 from ..fit.init import plane_sheet
 
 
@@ -82,7 +82,7 @@ def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
     return surface
 
 
-def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg) -> NURBSSurface:
+def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iters: int | None = None) -> NURBSSurface:
     base = get_pipeline("default")
     fit_cfg = dataclasses.replace(
         base,
@@ -93,41 +93,103 @@ def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg) -> N
         max_points=0,
         seed=cfg.seed,
         device=cfg.device,
-    ).with_iters(cfg.fit_iters)
+    ).with_iters(cfg.fit_iters if iters is None else iters)
     return fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg).surface.to(device="cpu")
+
+
+def wrap_axis(points: np.ndarray) -> np.ndarray:
+    """The axis ``(3,)`` a wrapped-around cloud turns about: the direction least seen by its normals.
+
+    On a surface of revolution every normal is orthogonal to the axis, so the axis is the
+    eigenvector of the smallest eigenvalue of the normals' second moment. Normals from PCA
+    on the cloud's own kNN graph (:mod:`.normals`).
+    """
+    from .normals import knn_graph, pca_normals
+
+    _, nb = knn_graph(points, 10)
+    n, _ = pca_normals(points, nb)
+    _, v = np.linalg.eigh(n.T @ n)
+    return v[:, 0]
+
+
+def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | None = None) -> NURBSSurface:
+    """A patch closed in v around the cloud's own axis (:func:`wrap_axis`).
+
+    The fit's cylinder start turns about the direction of largest spread, which is not
+    the axis of a short, wide tube (a cap-less can): there the cloud is first stretched
+    along its axis until that is the largest spread, fitted, and mapped back (NURBS are
+    affine invariant, so the map moves control points only), then polished in true
+    distances by alternating projection and least squares.
+    """
+    axis = wrap_axis(points)
+    c = points.mean(0)
+    rel = points - c
+    along = rel @ axis
+    across = rel - along[:, None] * axis
+    var_along, var_across = along.var(), np.linalg.eigvalsh(np.cov(across.T))[-1]
+    stretch = max(1.0, 1.5 * np.sqrt(var_across / max(var_along, 1e-300)))
+    if stretch == 1.0:
+        return _fit_once(points, ctrl, True, cfg, iters)
+    mapped = c + across + (stretch * along)[:, None] * axis
+    surface = _fit_once(mapped, ctrl, True, cfg, iters)
+    cp = surface.control_points.detach().double()
+    a = torch.as_tensor(axis)
+    c_t = torch.as_tensor(c)
+    h = (cp - c_t) @ a
+    cp = cp - ((1.0 - 1.0 / stretch) * h)[..., None] * a
+    surface = NURBSSurface(cp, surface.degrees, surface.knot_vectors, surface.weights)
+    if cfg.fit_rounds:
+        surface, _, _ = alternate(surface, torch.as_tensor(points), cfg.fit_rounds, Topology(closed_v=True), 1e-3, 1e-3)
+    return surface.detach()
 
 
 def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
     """Fit one patch to ``points (M, 3)`` (input units; ``eps`` the inlier tolerance there).
 
-    ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. Returns the patch with
-    every point's foot parameters and true distance.
+    ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. The grid grows while
+    fewer than 95 % of the fitted subset lie within ``eps / 2`` (decided on the subset;
+    every point is projected once at the end). Returns the patch with every point's foot
+    parameters and true distance.
     """
     rng = rng or np.random.default_rng(cfg.seed)
     sub = points if len(points) <= cfg.fit_points else points[rng.choice(len(points), cfg.fit_points, replace=False)]
     q = cfg.degree
-    closed = bool(looks_closed(torch.as_tensor(sub)))
+    closed = bool(looks_closed(torch.as_tensor(sub))) and 2 * q + 2 <= cfg.max_ctrl
     n_u = cfg.min_ctrl
     n_v = max(cfg.min_ctrl, 2 * q + 2) if closed else cfg.min_ctrl
-    if closed and 2 * q + 1 > cfg.max_ctrl:
-        closed, n_v = False, cfg.min_ctrl
     best = None
     fits = 0
     while True:
-        surface = _fit_once(sub, (n_u, n_v), closed, cfg)
+        surface = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
         fits += 1
-        params, dist = point_distances(surface, points)
+        _, dist = point_distances(surface, sub)
         good = float(np.mean(dist < eps / 2))
         if best is None or good > best[0] + 0.005:
-            best = (good, surface, params, dist, (n_u, n_v))
+            best = (good, surface, (n_u, n_v))
         else:
             break  # a larger grid no longer helps
         if good >= 0.95 or (n_u >= cfg.max_ctrl and n_v >= cfg.max_ctrl):
             break
         n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
         n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
-    _, surface, params, dist, ctrl = best
+    _, surface, ctrl = best
+    params, dist = point_distances(surface, points)
     return PatchFit(surface, closed, params, dist, ctrl, fits)
+
+
+def refine_patch(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, *,
+                 rng: np.random.Generator | None = None) -> NURBSSurface:
+    """The final fit of an accepted patch: same grid and topology, with the default refinement.
+
+    Candidates are compared with least-squares fits (fast); the winners get the ``default``
+    pipeline's refinement of control points, weights and knots (``final_iters``
+    iterations) on up to ``final_points`` of their points.
+    """
+    rng = rng or np.random.default_rng(cfg.seed)
+    sub = points if len(points) <= cfg.final_points else points[rng.choice(len(points), cfg.final_points, replace=False)]
+    if closed:
+        return _fit_closed(sub, ctrl, cfg, cfg.final_iters)
+    return _fit_once(sub, ctrl, False, cfg, cfg.final_iters)
 
 
 def crease_fraction(surface: NURBSSurface, params: np.ndarray, min_radius: float, limit: int = 4000) -> float:
