@@ -46,7 +46,7 @@ class PatchConfig:
     fit_rounds: int = _f(15, "alternating projection + least-squares rounds of each candidate fit")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
-    final_points: int = _f(2000, "fit each final patch on at most this many of its inliers")
+    final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
     max_quadric_error: float = _f(
         1.0,
         "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "

@@ -13,9 +13,11 @@ All distances are normalised by the input's bounding-box diagonal and compared w
   matched to it by the Hungarian method (unmatched segments count 0).
 
 P_cov^i and P_cov^o use area-uniform samples of the trimmed meshes, spaced about
-``eps / 5`` apart (:func:`nurbskit.geometry.sampling.sample_mesh`): an input point's
-distance to the nearest sample over-estimates its distance to the output by at most about
-half that spacing, so P_cov^i is, if anything, under-reported.
+``eps / 5`` apart (:func:`nurbskit.geometry.sampling.sample_mesh`). An input point's
+distance to the output is the smaller of its distance to the nearest sample and, for an
+inlier, its true distance to its own patch (its foot point lies inside the trim): the
+sample distance over-estimates by at most about half the spacing, so P_cov^i is, if
+anything, under-reported.
 """
 
 from __future__ import annotations
@@ -100,6 +102,8 @@ def patch_metrics(
     samples = output_samples(meshes, eps / 5, seed)
     if len(samples) and n:
         d_in, _ = cKDTree(samples).query(points, k=1)
+        # an inlier's true distance to its patch is exact (its foot point lies in the trim)
+        d_in = np.where(inl, np.minimum(d_in, inlier_distance), d_in)
         d_out, _ = cKDTree(points).query(samples, k=1)
         out["P_cov_i"] = float(100.0 * np.mean(d_in < eps))
         out["P_cov_o"] = float(100.0 * np.mean(d_out < eps))
