@@ -115,6 +115,7 @@ class _Region:
     closed: bool
     moments: tuple[np.ndarray, np.ndarray]
     origin: list[int]
+    topology: object = None
 
     def contribution(self, eps: float) -> Contribution:
         ok = self.distance < eps
@@ -284,7 +285,7 @@ def fit_patches(
             else:
                 (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
                 cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
-                               regions[a].origin + regions[b].origin)
+                               regions[a].origin + regions[b].origin, pf.topology)
             cache[key] = cand
         record = {"a": a, "b": b, "priority": e, "energy_before": u}
         if cand is None:
@@ -344,7 +345,7 @@ def fit_patches(
         elif cfg.final_iters:
             # the winners get the default refinement (candidates were least-squares fits)
             ok = reg.distance < eps
-            surface = refine_patch(x[reg.members[ok]], tuple(reg.surface.sizes), reg.closed, cfg, rng=rng)
+            surface = refine_patch(reg.surface, reg.topology, x[reg.members[ok]], cfg, rng=rng)
             p, d = point_distances(surface, x[reg.members])
             counts["refined"] = counts.get("refined", 0) + 1
             if (d < eps).sum() >= ok.sum():

@@ -10,7 +10,9 @@ region grows:
 2. a region takes a kNN neighbour when the neighbour's normal is within
    ``normal_angle`` of the plane's and its distance to the plane is below ``tol``
    (grown wave by wave; the plane is refitted by PCA each time the region grew by half);
-3. refinement: coplanar neighbouring regions merge, boundary points move to the
+3. refinement: coplanar neighbouring regions merge, strips along sharp edges (a
+   spacing or two wide, made of points whose normals blend two faces) are dropped,
+   boundary points move to the
    neighbouring plane that is closer, unassigned points join a neighbouring plane they fit,
    and regions smaller than ``min_region`` are dropped (their points become unassigned).
 
@@ -158,6 +160,24 @@ def _region_links(labels: np.ndarray, neighbours: np.ndarray) -> dict[tuple[int,
     return {(int(p), int(q)): int(c) for (p, q), c in zip(pairs, counts)}
 
 
+def drop_strips(points: np.ndarray, labels: np.ndarray, neighbours: np.ndarray, width: float = 1.5) -> np.ndarray:
+    """Unassign regions narrower than ``width`` point spacings (the std of their second principal direction).
+
+    Along a sharp edge the PCA normals blend the two faces, and the points of the edge can
+    grow into a strip of their own, one or two spacings wide: no surface, an artefact.
+    """
+    labels = labels.copy()
+    spacing = float(np.median(np.linalg.norm(points[neighbours[:, 0]] - points, axis=1)))
+    for r in range(int(labels.max()) + 1 if (labels >= 0).any() else 0):
+        idx = np.flatnonzero(labels == r)
+        if len(idx) < 3:
+            continue
+        w = np.linalg.eigvalsh(np.cov(points[idx].T))
+        if np.sqrt(max(w[1], 0.0)) < width * spacing:
+            labels[idx] = -1
+    return relabel_by_size(labels)
+
+
 def merge_coplanar(points: np.ndarray, labels: np.ndarray, neighbours: np.ndarray, tol: float, normal_angle: float) -> np.ndarray:
     """Merge neighbouring regions whose union is still a plane (RMS below ``tol / 2``, normals within the angle)."""
     labels = labels.copy()
@@ -236,6 +256,7 @@ def planar_start(
     labels = grow_regions(points, normals, neighbours, variation, tol, normal_angle, min_region)
     labels = relabel_by_size(labels)
     labels = merge_coplanar(points, labels, neighbours, tol, normal_angle)
+    labels = drop_strips(points, labels, neighbours)
     labels = reassign(points, normals, labels, neighbours, tol, normal_angle)
     labels = relabel_by_size(labels, min_region)
     centers, nrm = planes_of(points, labels)

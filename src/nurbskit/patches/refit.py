@@ -25,7 +25,7 @@ import torch
 
 from ..core import NURBSSurface
 from ..core.project import project_points
-from ..fit import Topology, alternate, fit_surface, get_pipeline, looks_closed
+from ..fit import SurfaceParameters, Target, Topology, alternate, fit_surface, get_pipeline, looks_closed, run_stage
 from ..fit.init import plane_sheet
 
 
@@ -41,6 +41,7 @@ class PatchFit:
     """``(M,)`` point-to-surface distances (input units)."""
     ctrl: tuple[int, int]
     fits: int = 1
+    topology: Topology = Topology()
 
 
 def point_distances(surface: NURBSSurface, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +83,7 @@ def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
     return surface
 
 
-def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iters: int | None = None) -> NURBSSurface:
+def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iters: int | None = None):
     base = get_pipeline("default")
     fit_cfg = dataclasses.replace(
         base,
@@ -94,7 +95,8 @@ def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iter
         seed=cfg.seed,
         device=cfg.device,
     ).with_iters(cfg.fit_iters if iters is None else iters)
-    return fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg).surface.to(device="cpu")
+    result = fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg)
+    return result.surface.to(device="cpu"), result.topology
 
 
 def wrap_axis(points: np.ndarray) -> np.ndarray:
@@ -112,7 +114,7 @@ def wrap_axis(points: np.ndarray) -> np.ndarray:
     return v[:, 0]
 
 
-def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | None = None) -> NURBSSurface:
+def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | None = None):
     """A patch closed in v around the cloud's own axis (:func:`wrap_axis`).
 
     The fit's cylinder start turns about the direction of largest spread, which is not
@@ -131,7 +133,7 @@ def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | Non
     if stretch == 1.0:
         return _fit_once(points, ctrl, True, cfg, iters)
     mapped = c + across + (stretch * along)[:, None] * axis
-    surface = _fit_once(mapped, ctrl, True, cfg, iters)
+    surface, topology = _fit_once(mapped, ctrl, True, cfg, iters)
     cp = surface.control_points.detach().double()
     a = torch.as_tensor(axis)
     c_t = torch.as_tensor(c)
@@ -139,8 +141,8 @@ def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | Non
     cp = cp - ((1.0 - 1.0 / stretch) * h)[..., None] * a
     surface = NURBSSurface(cp, surface.degrees, surface.knot_vectors, surface.weights)
     if cfg.fit_rounds:
-        surface, _, _ = alternate(surface, torch.as_tensor(points), cfg.fit_rounds, Topology(closed_v=True), 1e-3, 1e-3)
-    return surface.detach()
+        surface, _, _ = alternate(surface, torch.as_tensor(points), cfg.fit_rounds, topology, 1e-3, 1e-3)
+    return surface.detach(), topology
 
 
 def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
@@ -160,36 +162,46 @@ def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator |
     best = None
     fits = 0
     while True:
-        surface = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
+        surface, topology = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
         fits += 1
         _, dist = point_distances(surface, sub)
         good = float(np.mean(dist < eps / 2))
         if best is None or good > best[0] + 0.005:
-            best = (good, surface, (n_u, n_v))
+            best = (good, surface, (n_u, n_v), topology)
         else:
             break  # a larger grid no longer helps
         if good >= 0.95 or (n_u >= cfg.max_ctrl and n_v >= cfg.max_ctrl):
             break
         n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
         n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
-    _, surface, ctrl = best
+    _, surface, ctrl, topology = best
     params, dist = point_distances(surface, points)
-    return PatchFit(surface, closed, params, dist, ctrl, fits)
+    return PatchFit(surface, closed, params, dist, ctrl, fits, topology)
 
 
-def refine_patch(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, *,
+def refine_patch(surface: NURBSSurface, topology: Topology, points: np.ndarray, cfg, *,
                  rng: np.random.Generator | None = None) -> NURBSSurface:
-    """The final fit of an accepted patch: same grid and topology, with the default refinement.
+    """The ``default`` pipeline's refinement stage, started from an accepted patch.
 
-    Candidates are compared with least-squares fits (fast); the winners get the ``default``
-    pipeline's refinement of control points, weights and knots (``final_iters``
-    iterations) on up to ``final_points`` of their points.
+    Candidates are compared with least-squares fits (fast); a winner then gets the
+    refinement of control points, weights and knots of :func:`nurbskit.fit.run_stage`
+    (``final_iters`` iterations, on up to ``final_points`` of its inliers), in the fit's
+    normalised units (centred, unit diagonal) and mapped back.
     """
     rng = rng or np.random.default_rng(cfg.seed)
     sub = points if len(points) <= cfg.final_points else points[rng.choice(len(points), cfg.final_points, replace=False)]
-    if closed:
-        return _fit_closed(sub, ctrl, cfg, cfg.final_iters)
-    return _fit_once(sub, ctrl, False, cfg, cfg.final_iters)
+    pipeline = get_pipeline("default")
+    stage = dataclasses.replace(pipeline.stages[0], iters=cfg.final_iters)
+    x = torch.as_tensor(sub, dtype=torch.float64)
+    lo, hi = x.min(0).values, x.max(0).values
+    center, scale = (lo + hi) / 2, float((hi - lo).norm())
+    start = surface.detach().to(torch.float64)
+    start = start._replace(control_points=(start.control_points - center) / scale)
+    params = SurfaceParameters(start, topology)
+    run_stage(params, stage, Target(points=(x - center) / scale), tuple(pipeline.resolution))
+    with torch.no_grad():
+        out = params.surface()
+        return NURBSSurface(out.control_points * scale + center, out.degrees, out.knot_vectors, out.weights)
 
 
 def crease_fraction(surface: NURBSSurface, params: np.ndarray, min_radius: float, limit: int = 4000) -> float:
