@@ -346,10 +346,14 @@ def fit_patches(
             # the winners get the default refinement (candidates were least-squares fits)
             ok = reg.distance < eps
             surface = refine_patch(reg.surface, reg.topology, x[reg.members[ok]], cfg, rng=rng)
-            p, d = point_distances(surface, x[reg.members])
+            p, d = point_distances(surface, x[reg.members], reg.closed)
             counts["refined"] = counts.get("refined", 0) + 1
-            if (d < eps).sum() >= ok.sum():
+            before = reg.contribution(eps)
+            after = Contribution(int((d < eps).sum()), float(d[d < eps].sum() / eps))
+            u_after, _ = energy(_add(_add(total, before, -1), after), alive, s0, n, cfg.weights)
+            if u_after < u:  # kept, like a merge, only when the energy falls
                 reg.surface, reg.params, reg.distance = surface, p, d
+                total, u = _add(_add(total, before, -1), after), u_after
                 counts["refinements_kept"] = counts.get("refinements_kept", 0) + 1
         report("finalise", i + 1, len(final))
     owner = np.full(n, -1, dtype=np.int64)
@@ -368,7 +372,7 @@ def fit_patches(
             pts = out[(cand_labels == i).any(axis=1) & (owner[out] != i)]
             if not len(pts):
                 continue
-            p, d = point_distances(regions[r].surface, x[pts])
+            p, d = point_distances(regions[r].surface, x[pts], regions[r].closed)
             better = (d < eps) & (d < dist[pts])
             owner[pts[better]], dist[pts[better]], params[pts[better]] = i, d[better], p[better]
             moved += int(better.sum())

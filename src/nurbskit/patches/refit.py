@@ -44,13 +44,57 @@ class PatchFit:
     topology: Topology = Topology()
 
 
-def point_distances(surface: NURBSSurface, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``."""
+def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``.
+
+    The core's projection works on the box domain: on a surface closed in v a point whose
+    closest point lies just across the seam can stop on the seam itself (the v bound holds
+    it). With ``closed_v`` such points are projected again onto the same surface with its
+    seam turned half-way round (distinct control columns rolled, :func:`rolled_seam`) and
+    keep the closer answer.
+    """
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0)
+    x = torch.as_tensor(points, dtype=surface.dtype, device=surface.device)
     with torch.no_grad():
-        proj = project_points(surface.detach(), torch.as_tensor(points, dtype=surface.dtype, device=surface.device))
-    return proj.params.cpu().double().numpy(), proj.distance.cpu().double().numpy()
+        proj = project_points(surface.detach(), x)
+    params = proj.params.cpu().double().numpy()
+    dist = proj.distance.cpu().double().numpy()
+    if closed_v:
+        (v0, v1) = surface.domain[1]
+        stuck = np.flatnonzero((params[:, 1] <= v0) | (params[:, 1] >= v1))
+        if len(stuck):
+            turned, shift = rolled_seam(surface)
+            with torch.no_grad():
+                again = project_points(turned, x[stuck])
+            d2 = again.distance.cpu().double().numpy()
+            p2 = again.params.cpu().double().numpy()
+            p2[:, 1] = v0 + np.mod(p2[:, 1] - v0 + shift, v1 - v0)
+            better = d2 < dist[stuck]
+            dist[stuck[better]], params[stuck[better]] = d2[better], p2[better]
+    return params, dist
+
+
+def rolled_seam(surface: NURBSSurface) -> tuple[NURBSSurface, float]:
+    """The same closed-in-v surface with its seam moved half-way round, and the v shift.
+
+    With uniform periodic knots (:func:`nurbskit.fit.params.periodic_knots`) and the last
+    ``q`` control columns repeating the first ``q``, rolling the ``m = n_v - q`` distinct
+    columns by ``k`` gives ``S'(u, v) = S(u, v + k / m)`` (mod the domain length).
+    """
+    q = surface.degrees[1]
+    n_v = surface.sizes[1]
+    m = n_v - q
+    k = m // 2
+    cp = surface.control_points.detach()[:, :m]
+    w = surface.weights.detach()[:, :m] if surface.weights is not None else None
+    cp = torch.roll(cp, -k, dims=1)
+    cp = torch.cat([cp, cp[:, :q]], dim=1)
+    if w is not None:
+        w = torch.roll(w, -k, dims=1)
+        w = torch.cat([w, w[:, :q]], dim=1)
+    (v0, v1) = surface.domain[1]
+    return NURBSSurface(cp, surface.degrees, surface.knot_vectors, w), (v1 - v0) * k / m
 
 
 def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
@@ -164,7 +208,7 @@ def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator |
     while True:
         surface, topology = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
         fits += 1
-        _, dist = point_distances(surface, sub)
+        _, dist = point_distances(surface, sub, closed)
         good = float(np.mean(dist < eps / 2))
         if best is None or good > best[0] + 0.005:
             best = (good, surface, (n_u, n_v), topology)
@@ -175,7 +219,7 @@ def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator |
         n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
         n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
     _, surface, ctrl, topology = best
-    params, dist = point_distances(surface, points)
+    params, dist = point_distances(surface, points, closed)
     return PatchFit(surface, closed, params, dist, ctrl, fits, topology)
 
 
@@ -185,13 +229,17 @@ def refine_patch(surface: NURBSSurface, topology: Topology, points: np.ndarray, 
 
     Candidates are compared with least-squares fits (fast); a winner then gets the
     refinement of control points, weights and knots of :func:`nurbskit.fit.run_stage`
-    (``final_iters`` iterations, on up to ``final_points`` of its inliers), in the fit's
-    normalised units (centred, unit diagonal) and mapped back.
+    (``final_iters`` iterations, on up to ``final_points`` of its inliers; without the
+    coverage term, which trimming replaces), in the fit's normalised units (centred, unit
+    diagonal) and mapped back.
     """
     rng = rng or np.random.default_rng(cfg.seed)
     sub = points if len(points) <= cfg.final_points else points[rng.choice(len(points), cfg.final_points, replace=False)]
     pipeline = get_pipeline("default")
-    stage = dataclasses.replace(pipeline.stages[0], iters=cfg.final_iters)
+    # The coverage term pulls an untrimmed surface's border towards the data; a patch is
+    # trimmed to its data instead, so only point-to-surface distance and smoothness remain.
+    first = pipeline.stages[0]
+    stage = dataclasses.replace(first, iters=cfg.final_iters, loss=dataclasses.replace(first.loss, coverage=0.0))
     x = torch.as_tensor(sub, dtype=torch.float64)
     lo, hi = x.min(0).values, x.max(0).values
     center, scale = (lo + hi) / 2, float((hi - lo).norm())
