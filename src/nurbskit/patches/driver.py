@@ -362,7 +362,7 @@ def fit_patches(
     for i, r in enumerate(final):
         reg = regions[r]
         owner[reg.members], dist[reg.members], params[reg.members] = i, reg.distance, reg.params
-    for _ in range(2):
+    for _ in range(10):  # outliers next to newly assigned points get their turn in the next round
         out = np.flatnonzero(~(dist < eps))
         if not len(out):
             break

@@ -115,3 +115,19 @@ def patch_metrics(
     if truth is not None:
         out["iou"] = float(100.0 * segmentation_iou(labels, truth))
     return out
+
+
+def pcov_o_ceiling(points: np.ndarray, eps: float, k: int = 8) -> float:
+    """What P_cov^o a perfect answer reaches at this cloud's sampling density (percent), estimated.
+
+    A perfect answer is the sampled surface itself; a point of it counts when an input point
+    lies within ``eps``. If the input is a Poisson sample of local density ``rho`` (points
+    per area, from the distance to the k-th neighbour: ``rho = k / (pi r_k^2)``), that
+    happens with probability ``1 - exp(-rho pi eps^2)``; averaged over the surface (each
+    input point standing for ``1 / rho`` of area). Blue-noise or grid sampling covers more,
+    so this is a lower estimate of the ceiling for them.
+    """
+    d, _ = cKDTree(points).query(points, k=k + 1)
+    rho = k / (np.pi * np.maximum(d[:, -1], 1e-300) ** 2)
+    area = 1.0 / rho
+    return float(100.0 * np.sum(area * (1.0 - np.exp(-rho * np.pi * eps * eps))) / np.sum(area))
