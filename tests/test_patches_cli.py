@@ -83,11 +83,15 @@ def test_too_few_points_is_an_input_error(tmp_path, capsys):
     assert "at least 20 points" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_fit_patches_on_an_abc_cloud(shared_data):
+    """A 3,000-point subset of a real ABC cloud: few patches, most points covered, labels recovered."""
     from nurbskit.io import read_points
 
-    cloud = read_points(shared_file(shared_data, "abc/abc_00949.xyzc"))
+    cloud = read_points(shared_file(shared_data, "abc/abc_00470.xyzc"))
     keep = np.random.default_rng(0).choice(len(cloud.points), 3000, replace=False)
     res = fit_patches(cloud.points[keep], truth=cloud.labels[keep])
     m = res.metrics
-    assert m["completeness"] > 85 and m["P_cov_i"] > 85 and 1 <= m["N"] <= res.planar["planes"]
+    # measured on this subset: 6 patches, completeness and P_cov^i 98 %, IoU 69 %
+    assert m["completeness"] > 90 and m["P_cov_i"] > 90 and m["iou"] > 55
+    assert 2 <= m["N"] <= 10 < res.planar["planes"]
