@@ -20,8 +20,10 @@ P_cov^o ceiling is estimated from the sampling density
 the true surface. There is no peer in ../shared/peers for this method (the paper's code
 needs CUDA and GoCoPP); the paper's own ABC averages are quoted for reference.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...]``.
-Writes results/patches.json, results/patches.md and results/patches_figures/*.png.
+Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...] [--name RESULTS]``
+(``--merge A B`` combines the rows of separate runs into results/patches.*).
+Writes results/patches.json, results/patches.md (after every file) and
+results/patches_figures/*.png.
 """
 
 from __future__ import annotations
@@ -88,7 +90,18 @@ def inputs(only):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--name", default="patches", help="results file name (results/NAME.json, NAME.md)")
+    ap.add_argument("--merge", nargs="*", default=None, metavar="NAME",
+                    help="no runs: combine the rows of results/NAME.json files into results/patches.*")
     args = ap.parse_args(argv)
+    if args.merge:
+        import json
+
+        rows = []
+        for name in args.merge:
+            rows += [r for r in json.loads((RESULTS / f"{name}.json").read_text())["rows"] if r.get("kind") != "summary"]
+        write_table(rows, "patches")
+        return 0
     torch.set_num_threads(1)
     figures = RESULTS / "patches_figures"
     figures.mkdir(parents=True, exist_ok=True)
@@ -125,15 +138,23 @@ def main(argv=None) -> int:
         rows.append(row)
         plot_labels(points, res.labels, figures / f"{name}.png", f"{name}: {m['N']} patches")
         plot_labels(points, res.planar_labels, figures / f"{name}_planar.png", f"{name}: {res.planar['planes']} planes")
+        write_table(rows, args.name)  # after every file: a long run keeps what it measured
         print(f"{name}: N={m['N']} compl={m['completeness']:.1f} Pi={m['P_cov_i']:.1f} Po={m['P_cov_o']:.1f} "
               f"(ceiling {row['P_cov_o_ceiling']:.1f}) iou={row['iou']:.1f} {wall:.1f} s wall, {cpu:.1f} s cpu", flush=True)
+    write_table(rows, args.name)
+    return 0
+
+
+def write_table(rows: list[dict], name: str) -> None:
+    """results/NAME.json and NAME.md: one row per file and the ABC averages."""
+    rows = [r for r in rows if r.get("kind") != "summary"]
     abc = [r for r in rows if r["kind"] == "abc"]
     summary = {}
     if abc:
         summary = {k: float(np.mean([r[k] for r in abc])) for k in
                    ("completeness", "P_cov_i", "P_cov_o", "P_cov_o_of_ceiling", "N", "E_fid", "iou", "seconds", "cpu_seconds")}
         summary["min_P_cov_i"] = float(min(r["P_cov_i"] for r in abc))
-        rows.append({"name": "ABC average", "kind": "summary", **{k: v for k, v in summary.items()}})
+        rows = rows + [{"name": "ABC average", "kind": "summary", **summary}]
     columns = [("name", "input"), ("points", "points"), ("planes", "planes"), ("N", "|N|"), ("E_fid", "E_fid %"),
                ("completeness", "compl. %"), ("P_cov_i", "P_cov^i %"), ("P_cov_o", "P_cov^o %"),
                ("P_cov_o_ceiling", "P_cov^o ceiling %"), ("iou", "IoU %"), ("in_to_out_mean_pct", "in->out mean % diag"),
@@ -142,9 +163,8 @@ def main(argv=None) -> int:
     notes = ("Defaults (eps 1 % of the diagonal, weights 0.3/0.4/0.3, max 12 x 12). Paper's ABC averages: "
              f"completeness {PAPER_ABC['completeness']} %, P_cov^i {PAPER_ABC['P_cov_i']} %, P_cov^o {PAPER_ABC['P_cov_o']} %, "
              f"|N| {PAPER_ABC['N']}. Wall seconds on a shared 2-core machine (load varies); cpu s is this process's CPU time.")
-    write_results("patches", rows, columns, meta={"device": "cpu", "summary": summary, "paper_abc": PAPER_ABC},
+    write_results(name, rows, columns, meta={"device": "cpu", "summary": summary, "paper_abc": PAPER_ABC},
                   title="nurbskit patches on real data", notes=notes)
-    return 0
 
 
 if __name__ == "__main__":
