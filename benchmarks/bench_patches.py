@@ -94,6 +94,7 @@ def main(argv=None) -> int:
     ap.add_argument("--merge", nargs="*", default=None, metavar="NAME",
                     help="no runs: combine the rows of results/NAME.json files into results/patches.*")
     args = ap.parse_args(argv)
+    torch.set_num_threads(1)
     if args.merge:
         import json
 
