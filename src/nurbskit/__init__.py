@@ -35,6 +35,7 @@ _LAZY = {
     "sample_mesh": ("nurbskit.geometry.sampling", "sample_mesh"),
     "fit_surface": ("nurbskit.fit", "fit_surface"),
     "fit_silhouettes": ("nurbskit.volume", "fit_silhouettes"),
+    "fit_patches": ("nurbskit.patches", "fit_patches"),
     "io": ("nurbskit.io", None),
     "losses": ("nurbskit.losses", None),
     "metrics": ("nurbskit.metrics", None),

@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.volume_command",
     "nurbskit.cli.studio_command",
     "nurbskit.cli.export_command",
+    "nurbskit.cli.patches_command",
 )
 
 EXIT_BUG = 1

@@ -1,0 +1,417 @@
+"""``fit_patches``: a point cloud as a few trimmed NURBS patches (NURBSFit, Algorithm 1).
+
+Flow (one function per step, each in its own module):
+
+1. **normals** (:mod:`.normals`): kept when given, else PCA on the kNN graph, oriented by
+   propagation;
+2. **planar start** (:mod:`.planar`): region growing + refinement, or labels from a
+   GoCoPP / PolyFit ``.vg`` file;
+3. **adjacency** (:mod:`.adjacency`) and **priority** (:mod:`.quadric`, :mod:`.queue`):
+   every pair of adjacent regions enters a heap keyed by the Taubin quadric error of
+   their union (sums of 10 x 10 moment matrices);
+4. **merge and refit** (:mod:`.refit`, :mod:`.energy`): the cheapest pair is fitted with
+   one NURBS patch (the project's fitting), its inliers found by true projection, and the
+   merge kept only when the energy U decreases and the patch does not round a sharp crease;
+   a rejected pair is tried again (with its cached fit) when a neighbour of it changes;
+5. **finalise**: untouched planar regions become flat patches, outliers join a
+   neighbouring patch they lie within ``eps`` of;
+6. **trim** (:mod:`.trim`): alpha shapes of the inliers in (u, v), trimmed meshes;
+7. **metrics** (:mod:`.metrics`).
+
+Convention: ``points (N, 3)`` in any units; ``eps`` and the other lengths of
+:class:`~nurbskit.patches.config.PatchConfig` are fractions of the bounding-box diagonal.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import torch
+
+from ..core import NURBSSurface
+from ..core.trim import TrimmedSurface
+from ..errors import InputError
+from .adjacency import adjacency
+from .config import PatchConfig
+from .energy import Contribution, energy
+from .metrics import patch_metrics
+from .normals import knn_graph, orient_normals, pca_normals
+from .planar import planar_start, planes_of, relabel_by_size, plane_distances
+from .quadric import moments, taubin_error
+from .queue import MergeQueue
+from .refit import crease_fraction, fit_patch, plane_patch, point_distances, refine_patch
+from .trim import trim_patch, trimmed_mesh
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass
+class Patch:
+    """One output patch: its surface, trimmed faces, inliers and trimmed mesh."""
+
+    surface: NURBSSurface
+    closed: bool
+    faces: list[TrimmedSurface]
+    inliers: np.ndarray
+    """``(M,)`` indices of the input points that are inliers of this patch."""
+    distance: np.ndarray
+    """``(M,)`` their true distances to the surface (input units)."""
+    params: np.ndarray
+    """``(M, 2)`` their foot-point parameters."""
+    regions: list[int]
+    """The planar-start regions merged into this patch."""
+    mesh: tuple[np.ndarray, np.ndarray]
+    """Trimmed triangle mesh of all faces: ``vertices (V, 3)``, ``faces (F, 3)``."""
+
+    def summary(self) -> dict:
+        return {
+            "ctrl": list(self.surface.sizes),
+            "degrees": list(self.surface.degrees),
+            "closed_v": bool(self.closed),
+            "inliers": int(len(self.inliers)),
+            "mean_distance": float(self.distance.mean()) if len(self.distance) else 0.0,
+            "planar_regions": [int(r) for r in self.regions],
+            "faces": len(self.faces),
+            "holes": sum(len(f.holes) for f in self.faces),
+            "triangles": int(len(self.mesh[1])),
+        }
+
+
+@dataclass
+class PatchSet:
+    """The result of :func:`fit_patches`."""
+
+    patches: list[Patch]
+    labels: np.ndarray
+    """``(N,)`` patch per input point, -1 for outliers."""
+    points: np.ndarray
+    normals: np.ndarray
+    planar_labels: np.ndarray
+    config: PatchConfig
+    eps: float
+    """The inlier tolerance in input units."""
+    history: list[dict] = field(default_factory=list)
+    """One record per merge tried: regions, priority, energy before/after, accepted."""
+    energy: list[float] = field(default_factory=list)
+    """The energy U after the start and after every accepted merge."""
+    metrics: dict = field(default_factory=dict)
+    planar: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.patches)
+
+
+@dataclass
+class _Region:
+    members: np.ndarray
+    distance: np.ndarray
+    params: np.ndarray | None
+    surface: NURBSSurface | None
+    closed: bool
+    moments: tuple[np.ndarray, np.ndarray]
+    origin: list[int]
+    topology: object = None
+
+    def contribution(self, eps: float) -> Contribution:
+        ok = self.distance < eps
+        return Contribution(int(ok.sum()), float(self.distance[ok].sum() / eps))
+
+
+def _add(a: Contribution, b: Contribution, sign: int = 1) -> Contribution:
+    return Contribution(a.inliers + sign * b.inliers, a.distance + sign * b.distance)
+
+
+def _check_points(points) -> np.ndarray:
+    if isinstance(points, torch.Tensor):
+        points = points.detach().cpu().numpy()
+    x = np.asarray(points, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise InputError(f"points must have shape (N, 3), got {x.shape}")
+    if len(x) < 20:
+        raise InputError(f"multi-patch fitting needs at least 20 points, got {len(x)}")
+    if not np.isfinite(x).all():
+        raise InputError("points contain NaN or infinite values")
+    if not np.linalg.norm(x.max(0) - x.min(0)) > 0:
+        raise InputError(f"all {len(x)} points coincide; there is no surface to fit")
+    return x
+
+
+def fit_patches(
+    points,
+    normals=None,
+    config: PatchConfig | None = None,
+    *,
+    init_labels: np.ndarray | None = None,
+    truth: np.ndarray | None = None,
+    progress: Progress | None = None,
+) -> PatchSet:
+    """Fit a few trimmed NURBS patches to a point cloud (module docstring).
+
+    Args:
+        points: ``(N, 3)`` array or tensor.
+        normals: ``(N, 3)`` normals, or None to estimate them.
+        config: a :class:`PatchConfig` (None: the defaults).
+        init_labels: ``(N,)`` planar-start regions (-1: none), e.g. from :func:`read_vg`;
+            None: our region growing.
+        truth: ``(N,)`` true segment labels, for the IoU metric.
+        progress: called as ``progress(stage, done, total)``.
+
+    Returns:
+        a :class:`PatchSet`.
+
+    Example:
+        >>> rng = np.random.default_rng(0)
+        >>> xy = rng.random((400, 2))
+        >>> result = fit_patches(np.c_[xy, 0.05 * xy[:, 0] ** 2])
+        >>> len(result), result.metrics["completeness"] > 99
+        (1, True)
+    """
+    cfg = (config or PatchConfig()).validate()
+    x = _check_points(points)
+    n = len(x)
+    report = progress or (lambda stage, done, total: None)
+    timings: dict[str, float] = {}
+    lo, hi = x.min(0), x.max(0)
+    diag = float(np.linalg.norm(hi - lo))
+    eps = cfg.eps * diag
+    xn = (x - (lo + hi) / 2) / diag  # for the quadric moments: unit diagonal
+    rng = np.random.default_rng(cfg.seed)
+
+    # 1. normals
+    t = time.perf_counter()
+    report("normals", 0, 1)
+    _, nb = knn_graph(x, cfg.neighbours)
+    pca, variation = pca_normals(x, nb)
+    if normals is None:
+        nrm = orient_normals(x, pca, nb)
+    else:
+        nrm = np.asarray(normals.detach().cpu().numpy() if isinstance(normals, torch.Tensor) else normals, dtype=np.float64)
+        if nrm.shape != x.shape:
+            raise InputError(f"normals must have the points' shape {x.shape}, got {nrm.shape}")
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    report("normals", 1, 1)
+    timings["normals"] = time.perf_counter() - t
+
+    # 2. planar start
+    t = time.perf_counter()
+    report("planar", 0, 1)
+    min_region = cfg.min_region or max(10, int(0.002 * n))
+    if init_labels is None:
+        start = planar_start(x, nrm, nb, variation, cfg.planar_eps * eps, cfg.normal_angle, min_region)
+        labels0 = start.labels
+    else:
+        labels0 = np.asarray(init_labels, dtype=np.int64)
+        if labels0.shape != (n,):
+            raise InputError(f"the planar start has {labels0.shape[0]} labels for {n} points")
+        labels0 = relabel_by_size(labels0, 3)
+    centers, plane_normals = planes_of(x, labels0)
+    inside = labels0 >= 0
+    pd = plane_distances(x[inside], centers[labels0[inside]], plane_normals[labels0[inside]])
+    planar = {
+        "planes": int(len(centers)),
+        "coverage": float(100.0 * inside.mean()),
+        "mean_error": float(pd.mean() / diag) if len(pd) else 0.0,
+        "source": "region growing" if init_labels is None else "vertex groups",
+    }
+    if len(centers) == 0:
+        raise InputError("the planar start found no region: the cloud is too sparse or too noisy for this eps")
+    report("planar", 1, 1)
+    timings["planar"] = time.perf_counter() - t
+
+    # 3. regions, adjacency and priorities
+    t = time.perf_counter()
+    regions: dict[int, _Region] = {}
+    order = np.argsort(labels0, kind="stable")
+    bounds = np.searchsorted(labels0[order], np.arange(len(centers) + 1))
+    for r in range(len(centers)):
+        idx = order[bounds[r] : bounds[r + 1]]
+        d = plane_distances(x[idx], np.broadcast_to(centers[r], (len(idx), 3)), np.broadcast_to(plane_normals[r], (len(idx), 3)))
+        regions[r] = _Region(idx, d, None, None, False, moments(xn[idx]), [r])
+    graph = adjacency(labels0, nb, cfg.min_links)
+    queue = MergeQueue()
+    priority: dict[tuple[int, int], float] = {}
+
+    def pair_error(a: int, b: int) -> float:
+        (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
+        return taubin_error(ma + mb, na + nb_) / cfg.eps**2  # in eps^2
+
+    for a in graph:
+        for b in graph[a]:
+            if a < b:
+                priority[(a, b)] = pair_error(a, b)
+                queue.push(priority[(a, b)], a, b)
+    timings["priority"] = time.perf_counter() - t
+
+    # 4. merge and refit
+    t = time.perf_counter()
+    s0 = len(regions)
+    total = Contribution(0, 0.0)
+    for reg in regions.values():
+        total = _add(total, reg.contribution(eps))
+    alive = s0
+    u, parts = energy(total, alive, s0, n, cfg.weights)
+    energies = [u]
+    history: list[dict] = []
+    cache: dict[tuple[int, int], _Region | None] = {}
+    rejected: set[tuple[int, int]] = set()
+    counts = {"fits": 0, "candidates": 0, "accepted": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
+    next_id = s0
+    while True:
+        item = queue.pop()
+        if item is None:
+            break
+        e, a, b = item
+        if cfg.max_quadric_error and e > cfg.max_quadric_error:
+            counts["skipped_quadric"] += 1
+            continue
+        key = (a, b)
+        if key in cache:
+            cand = cache[key]
+            counts["retries"] += 1
+        else:
+            members = np.concatenate([regions[a].members, regions[b].members])
+            pf = fit_patch(x[members], eps, cfg, rng=rng)
+            counts["fits"] += pf.fits
+            counts["candidates"] += 1
+            ok = pf.distance < eps
+            if crease_fraction(pf.surface, pf.params[ok], cfg.min_radius * eps) > cfg.crease_fraction:
+                cand = None
+                counts["creases"] += 1
+            else:
+                (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
+                cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
+                               regions[a].origin + regions[b].origin, pf.topology)
+            cache[key] = cand
+        record = {"a": a, "b": b, "priority": e, "energy_before": u}
+        if cand is None:
+            record.update(accepted=False, reason="crease")
+            history.append(record)
+            report("merge", counts["accepted"], s0 - 1)
+            continue
+        new_total = _add(_add(total, regions[a].contribution(eps), -1), regions[b].contribution(eps), -1)
+        new_total = _add(new_total, cand.contribution(eps))
+        u_new, parts_new = energy(new_total, alive - 1, s0, n, cfg.weights)
+        record.update(energy_after=u_new, ctrl=list(cand.surface.sizes), closed_v=cand.closed)
+        if u_new < u:
+            new = next_id
+            next_id += 1
+            regions[new] = cand
+            queue.retire(a)
+            queue.retire(b)
+            links: dict[int, int] = {}
+            for old in (a, b):
+                for c, k in graph.pop(old).items():
+                    if c not in (a, b):
+                        links[c] = links.get(c, 0) + k
+                        graph[c].pop(old, None)
+            graph[new] = links
+            for c, k in links.items():
+                graph[c][new] = k
+                pk = (min(c, new), max(c, new))
+                priority[pk] = pair_error(c, new)
+                queue.push(priority[pk], c, new)
+            # A neighbour changed: try its rejected merges again (their fits are cached).
+            for pair in sorted(rejected):
+                if not (queue.alive(pair[0]) and queue.alive(pair[1])):
+                    rejected.discard(pair)
+                elif pair[0] in links or pair[1] in links:
+                    rejected.discard(pair)
+                    queue.push(priority[pair], *pair)
+            del regions[a], regions[b]
+            total, u, alive = new_total, u_new, alive - 1
+            energies.append(u)
+            counts["accepted"] += 1
+            record.update(accepted=True, new=new)
+        else:
+            rejected.add(key)
+            record.update(accepted=False, reason="energy")
+        history.append(record)
+        report("merge", counts["accepted"], s0 - 1)
+    timings["merge"] = time.perf_counter() - t
+
+    # 5. finalise: planar regions become flat patches; outliers join a patch they fit
+    t = time.perf_counter()
+    final = sorted(regions, key=lambda r: -len(regions[r].members))
+    for i, r in enumerate(final):
+        reg = regions[r]
+        if reg.surface is None:
+            reg.surface = plane_patch(x[reg.members], cfg.min_ctrl, cfg.degree)
+            reg.params, reg.distance = point_distances(reg.surface, x[reg.members])
+        elif cfg.final_iters:
+            # the winners get the default refinement (candidates were least-squares fits)
+            ok = reg.distance < eps
+            surface = refine_patch(reg.surface, reg.topology, x[reg.members[ok]], cfg, rng=rng)
+            p, d = point_distances(surface, x[reg.members], reg.closed)
+            counts["refined"] = counts.get("refined", 0) + 1
+            before = reg.contribution(eps)
+            after = Contribution(int((d < eps).sum()), float(d[d < eps].sum() / eps))
+            u_after, _ = energy(_add(_add(total, before, -1), after), alive, s0, n, cfg.weights)
+            if u_after < u:  # kept, like a merge, only when the energy falls
+                reg.surface, reg.params, reg.distance = surface, p, d
+                total, u = _add(_add(total, before, -1), after), u_after
+                counts["refinements_kept"] = counts.get("refinements_kept", 0) + 1
+        report("finalise", i + 1, len(final))
+    owner = np.full(n, -1, dtype=np.int64)
+    dist = np.full(n, np.inf)
+    params = np.zeros((n, 2))
+    for i, r in enumerate(final):
+        reg = regions[r]
+        owner[reg.members], dist[reg.members], params[reg.members] = i, reg.distance, reg.params
+    for _ in range(10):  # outliers next to newly assigned points get their turn in the next round
+        out = np.flatnonzero(~(dist < eps))
+        if not len(out):
+            break
+        cand_labels = owner[nb[out]]  # patches of the outliers' neighbours
+        moved = 0
+        for i, r in enumerate(final):
+            pts = out[(cand_labels == i).any(axis=1) & (owner[out] != i)]
+            if not len(pts):
+                continue
+            p, d = point_distances(regions[r].surface, x[pts], regions[r].closed)
+            better = (d < eps) & (d < dist[pts])
+            owner[pts[better]], dist[pts[better]], params[pts[better]] = i, d[better], p[better]
+            moved += int(better.sum())
+        if not moved:
+            break
+    labels = np.where(dist < eps, owner, -1)
+    timings["finalise"] = time.perf_counter() - t
+
+    # 6. trim
+    t = time.perf_counter()
+    patches: list[Patch] = []
+    for i, r in enumerate(final):
+        idx = np.flatnonzero(labels == i)
+        reg = regions[r]
+        faces = trim_patch(params[idx], reg.surface, reg.closed) if len(idx) >= 3 else []
+        if not faces:
+            labels[idx] = -1
+            continue
+        vs, fs, offset = [], [], 0
+        for face in faces:
+            v, f = trimmed_mesh(face)
+            vs.append(v)
+            fs.append(f + offset)
+            offset += len(v)
+        mesh = (np.concatenate(vs), np.concatenate(fs))
+        labels[idx] = len(patches)
+        patches.append(Patch(reg.surface, reg.closed, faces, idx, dist[idx], params[idx], reg.origin, mesh))
+        report("trim", i + 1, len(final))
+    timings["trim"] = time.perf_counter() - t
+
+    # 7. metrics
+    t = time.perf_counter()
+    report("metrics", 0, 1)
+    m = patch_metrics(x, labels, np.where(labels >= 0, dist, 0.0), [p.mesh for p in patches], eps, truth=truth, seed=cfg.seed)
+    final_total = Contribution(int((labels >= 0).sum()), float(dist[labels >= 0].sum() / eps))
+    m["energy"], parts = energy(final_total, len(patches), s0, n, cfg.weights)
+    m["energy_parts"] = parts
+    report("metrics", 1, 1)
+    timings["metrics"] = time.perf_counter() - t
+    counts["stale_pops"] = queue.stale_pops
+    counts["pushes"] = queue.pushes
+    return PatchSet(patches, labels, x, nrm, labels0, cfg, eps, history, energies, m, planar, timings, counts)

@@ -1,0 +1,261 @@
+"""One NURBS patch for a set of points, with the project's own fitting, and its inliers.
+
+:func:`fit_patch` runs :func:`nurbskit.fit.fit_surface` (least-squares start on the best
+plane or, where the points wrap around, cylinder parametrisation; then alternating
+projection + least squares and the ``default`` refinement of control points, weights and
+knots, shortened), on a seeded subset of the points. The control grid starts at
+``min_ctrl`` and grows (x 1.5) while too few points lie within ``eps / 2`` of the patch, up
+to ``max_ctrl``: a patch gets the control points its shape needs (the paper fixes 4 x 4).
+Where the points wrap around (:func:`nurbskit.fit.looks_closed`) the patch is closed in v
+with a periodic seam (the paper's patches are open only).
+
+:func:`point_distances` gives TRUE point-to-surface distances by Newton projection
+(:func:`nurbskit.core.project.project_points`), not distances to the nearest of a grid of
+samples, and :func:`bend_radii` the smallest radius of curvature at given parameters (used
+to refuse a patch that rounds a sharp crease).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..core import NURBSSurface
+from ..core.project import project_points
+from ..fit import SurfaceParameters, Target, Topology, alternate, fit_surface, get_pipeline, looks_closed, run_stage
+from ..fit.init import plane_sheet
+
+
+@dataclass
+class PatchFit:
+    """A fitted patch and where the points it was fitted to fall on it."""
+
+    surface: NURBSSurface
+    closed: bool
+    params: np.ndarray
+    """``(M, 2)`` foot-point parameters of the points."""
+    distance: np.ndarray
+    """``(M,)`` point-to-surface distances (input units)."""
+    ctrl: tuple[int, int]
+    fits: int = 1
+    topology: Topology = Topology()
+
+
+def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``.
+
+    The core's projection works on the box domain: on a surface closed in v a point whose
+    closest point lies just across the seam can stop on the seam itself (the v bound holds
+    it). With ``closed_v`` such points are projected again onto the same surface with its
+    seam turned half-way round (distinct control columns rolled, :func:`rolled_seam`) and
+    keep the closer answer.
+    """
+    if len(points) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    x = torch.as_tensor(points, dtype=surface.dtype, device=surface.device)
+    with torch.no_grad():
+        proj = project_points(surface.detach(), x)
+    params = proj.params.cpu().double().numpy()
+    dist = proj.distance.cpu().double().numpy()
+    if closed_v:
+        (v0, v1) = surface.domain[1]
+        stuck = np.flatnonzero((params[:, 1] <= v0) | (params[:, 1] >= v1))
+        if len(stuck):
+            turned, shift = rolled_seam(surface)
+            with torch.no_grad():
+                again = project_points(turned, x[stuck])
+            d2 = again.distance.cpu().double().numpy()
+            p2 = again.params.cpu().double().numpy()
+            p2[:, 1] = v0 + np.mod(p2[:, 1] - v0 + shift, v1 - v0)
+            better = d2 < dist[stuck]
+            dist[stuck[better]], params[stuck[better]] = d2[better], p2[better]
+    return params, dist
+
+
+def rolled_seam(surface: NURBSSurface) -> tuple[NURBSSurface, float]:
+    """The same closed-in-v surface with its seam moved half-way round, and the v shift.
+
+    With uniform periodic knots (:func:`nurbskit.fit.params.periodic_knots`) and the last
+    ``q`` control columns repeating the first ``q``, rolling the ``m = n_v - q`` distinct
+    columns by ``k`` gives ``S'(u, v) = S(u, v + k / m)`` (mod the domain length).
+    """
+    q = surface.degrees[1]
+    n_v = surface.sizes[1]
+    m = n_v - q
+    k = m // 2
+    cp = surface.control_points.detach()[:, :m]
+    w = surface.weights.detach()[:, :m] if surface.weights is not None else None
+    cp = torch.roll(cp, -k, dims=1)
+    cp = torch.cat([cp, cp[:, :q]], dim=1)
+    if w is not None:
+        w = torch.roll(w, -k, dims=1)
+        w = torch.cat([w, w[:, :q]], dim=1)
+    (v0, v1) = surface.domain[1]
+    return NURBSSurface(cp, surface.degrees, surface.knot_vectors, w), (v1 - v0) * k / m
+
+
+def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
+    """Smallest radius of curvature ``1 / max |k_i|`` at ``params (M, 2)`` -> ``(M,)``.
+
+    Principal curvatures from the first and second fundamental forms (do Carmo, section
+    3-3): ``k`` solves ``det(II - k I) = 0``.
+    """
+    if len(params) == 0:
+        return np.zeros(0)
+    with torch.no_grad():
+        d = surface.detach().derivatives(torch.as_tensor(params, dtype=surface.dtype, device=surface.device), order=2)
+    d = d.cpu().double().numpy()
+    su, sv = d[:, 1, 0], d[:, 0, 1]
+    suu, suv, svv = d[:, 2, 0], d[:, 1, 1], d[:, 0, 2]
+    n = np.cross(su, sv)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    E, F, G = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+    L, M, N = (suu * n).sum(1), (suv * n).sum(1), (svv * n).sum(1)
+    det = np.maximum(E * G - F * F, 1e-300)
+    H = (E * N - 2 * F * M + G * L) / (2 * det)
+    K = (L * N - M * M) / det
+    kmax = np.abs(H) + np.sqrt(np.maximum(H * H - K, 0.0))
+    return 1.0 / np.maximum(kmax, 1e-300)
+
+
+def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
+    """A flat patch on the best-fitting plane of ``points``, over their bounding rectangle."""
+    surface, _ = plane_sheet(torch.as_tensor(points, dtype=torch.float64), (ctrl, ctrl), (degree, degree))
+    return surface
+
+
+def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iters: int | None = None):
+    base = get_pipeline("default")
+    fit_cfg = dataclasses.replace(
+        base,
+        ctrl=ctrl,
+        degree=(cfg.degree, cfg.degree),
+        init=dataclasses.replace(base.init, closed="v" if closed else "open"),
+        alternation=dataclasses.replace(base.alternation, rounds=cfg.fit_rounds),
+        max_points=0,
+        seed=cfg.seed,
+        device=cfg.device,
+    ).with_iters(cfg.fit_iters if iters is None else iters)
+    result = fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg)
+    return result.surface.to(device="cpu"), result.topology
+
+
+def wrap_axis(points: np.ndarray) -> np.ndarray:
+    """The axis ``(3,)`` a wrapped-around cloud turns about: the direction least seen by its normals.
+
+    On a surface of revolution every normal is orthogonal to the axis, so the axis is the
+    eigenvector of the smallest eigenvalue of the normals' second moment. Normals from PCA
+    on the cloud's own kNN graph (:mod:`.normals`).
+    """
+    from .normals import knn_graph, pca_normals
+
+    _, nb = knn_graph(points, 10)
+    n, _ = pca_normals(points, nb)
+    _, v = np.linalg.eigh(n.T @ n)
+    return v[:, 0]
+
+
+def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | None = None):
+    """A patch closed in v around the cloud's own axis (:func:`wrap_axis`).
+
+    The fit's cylinder start turns about the direction of largest spread, which is not
+    the axis of a short, wide tube (a cap-less can): there the cloud is first stretched
+    along its axis until that is the largest spread, fitted, and mapped back (NURBS are
+    affine invariant, so the map moves control points only), then polished in true
+    distances by alternating projection and least squares.
+    """
+    axis = wrap_axis(points)
+    c = points.mean(0)
+    rel = points - c
+    along = rel @ axis
+    across = rel - along[:, None] * axis
+    var_along, var_across = along.var(), np.linalg.eigvalsh(np.cov(across.T))[-1]
+    stretch = max(1.0, 1.5 * np.sqrt(var_across / max(var_along, 1e-300)))
+    if stretch == 1.0:
+        return _fit_once(points, ctrl, True, cfg, iters)
+    mapped = c + across + (stretch * along)[:, None] * axis
+    surface, topology = _fit_once(mapped, ctrl, True, cfg, iters)
+    cp = surface.control_points.detach().double()
+    a = torch.as_tensor(axis)
+    c_t = torch.as_tensor(c)
+    h = (cp - c_t) @ a
+    cp = cp - ((1.0 - 1.0 / stretch) * h)[..., None] * a
+    surface = NURBSSurface(cp, surface.degrees, surface.knot_vectors, surface.weights)
+    if cfg.fit_rounds:
+        surface, _, _ = alternate(surface, torch.as_tensor(points), cfg.fit_rounds, topology, 1e-3, 1e-3)
+    return surface.detach(), topology
+
+
+def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
+    """Fit one patch to ``points (M, 3)`` (input units; ``eps`` the inlier tolerance there).
+
+    ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. The grid grows while
+    fewer than 95 % of the fitted subset lie within ``eps / 2`` (decided on the subset;
+    every point is projected once at the end). Returns the patch with every point's foot
+    parameters and true distance.
+    """
+    rng = rng or np.random.default_rng(cfg.seed)
+    sub = points if len(points) <= cfg.fit_points else points[rng.choice(len(points), cfg.fit_points, replace=False)]
+    q = cfg.degree
+    closed = bool(looks_closed(torch.as_tensor(sub))) and 2 * q + 2 <= cfg.max_ctrl
+    n_u = cfg.min_ctrl
+    n_v = max(cfg.min_ctrl, 2 * q + 2) if closed else cfg.min_ctrl
+    best = None
+    fits = 0
+    while True:
+        surface, topology = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
+        fits += 1
+        _, dist = point_distances(surface, sub, closed)
+        good = float(np.mean(dist < eps / 2))
+        if best is None or good > best[0] + 0.005:
+            best = (good, surface, (n_u, n_v), topology)
+        else:
+            break  # a larger grid no longer helps
+        if good >= 0.95 or (n_u >= cfg.max_ctrl and n_v >= cfg.max_ctrl):
+            break
+        n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
+        n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
+    _, surface, ctrl, topology = best
+    params, dist = point_distances(surface, points, closed)
+    return PatchFit(surface, closed, params, dist, ctrl, fits, topology)
+
+
+def refine_patch(surface: NURBSSurface, topology: Topology, points: np.ndarray, cfg, *,
+                 rng: np.random.Generator | None = None) -> NURBSSurface:
+    """The ``default`` pipeline's refinement stage, started from an accepted patch.
+
+    Candidates are compared with least-squares fits (fast); a winner then gets the
+    refinement of control points, weights and knots of :func:`nurbskit.fit.run_stage`
+    (``final_iters`` iterations, on up to ``final_points`` of its inliers; without the
+    coverage term, which trimming replaces), in the fit's normalised units (centred, unit
+    diagonal) and mapped back.
+    """
+    rng = rng or np.random.default_rng(cfg.seed)
+    sub = points if len(points) <= cfg.final_points else points[rng.choice(len(points), cfg.final_points, replace=False)]
+    pipeline = get_pipeline("default")
+    # The coverage term pulls an untrimmed surface's border towards the data; a patch is
+    # trimmed to its data instead, so only point-to-surface distance and smoothness remain.
+    first = pipeline.stages[0]
+    stage = dataclasses.replace(first, iters=cfg.final_iters, loss=dataclasses.replace(first.loss, coverage=0.0))
+    x = torch.as_tensor(sub, dtype=torch.float64)
+    lo, hi = x.min(0).values, x.max(0).values
+    center, scale = (lo + hi) / 2, float((hi - lo).norm())
+    start = surface.detach().to(torch.float64)
+    start = start._replace(control_points=(start.control_points - center) / scale)
+    params = SurfaceParameters(start, topology)
+    run_stage(params, stage, Target(points=(x - center) / scale), tuple(pipeline.resolution))
+    with torch.no_grad():
+        out = params.surface()
+        return NURBSSurface(out.control_points * scale + center, out.degrees, out.knot_vectors, out.weights)
+
+
+def crease_fraction(surface: NURBSSurface, params: np.ndarray, min_radius: float, limit: int = 4000) -> float:
+    """Fraction of the given foot points where the patch bends tighter than ``min_radius``."""
+    if len(params) == 0:
+        return 0.0
+    if len(params) > limit:
+        params = params[np.linspace(0, len(params) - 1, limit).astype(int)]
+    return float(np.mean(bend_radii(surface, params) < min_radius))

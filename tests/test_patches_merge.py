@@ -1,0 +1,74 @@
+"""Merging: one cylinder's two halves become one (closed) patch; two perpendicular planes stay two."""
+
+import numpy as np
+
+from nurbskit.patches import PatchConfig, fit_patches
+from nurbskit.patches.energy import Contribution, energy
+from nurbskit.patches.refit import bend_radii, fit_patch
+from nurbskit.patches.config import PatchConfig as Cfg
+
+
+def _cylinder(n, rng, r=0.3, h=1.0):
+    t, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, h, n)
+    return np.c_[r * np.cos(t), r * np.sin(t), z], t
+
+
+def test_two_half_cylinders_merge_into_one_closed_patch():
+    rng = np.random.default_rng(0)
+    p, t = _cylinder(1500, rng)
+    halves = (t < np.pi).astype(np.int64)
+    res = fit_patches(p, config=PatchConfig(final_iters=0), init_labels=halves)
+    assert len(res) == 1
+    assert res.patches[0].closed
+    assert sorted(res.patches[0].regions) == [0, 1]
+    assert res.metrics["completeness"] > 99.0
+    assert res.history[0]["accepted"] and res.energy[1] < res.energy[0]
+
+
+def test_two_perpendicular_planes_do_not_merge():
+    rng = np.random.default_rng(1)
+    a = rng.random((800, 2))
+    p = np.vstack([np.c_[a[:400, 0], a[:400, 1], np.zeros(400)], np.c_[np.zeros(400), a[400:, 1], a[400:, 0]]])
+    labels = np.repeat([0, 1], 400)
+    res = fit_patches(p, config=PatchConfig(final_iters=0), init_labels=labels)
+    assert len(res) == 2
+    assert res.history and not any(h["accepted"] for h in res.history)
+    for patch in res.patches:  # each plane keeps its own points
+        assert len(np.unique(labels[patch.inliers])) == 1
+
+
+def test_bend_radius_of_a_cylinder_patch_is_its_radius():
+    rng = np.random.default_rng(2)
+    p, t = _cylinder(1200, rng, r=0.3)
+    half = p[t < np.pi]
+    pf = fit_patch(half, 0.01, Cfg())
+    r = bend_radii(pf.surface, pf.params[pf.distance < 0.005])
+    assert abs(np.median(r) - 0.3) < 0.02
+
+
+def test_energy_by_hand():
+    # 3 patches of 10 initial, 80 of 100 points inliers, mean inlier distance 0.25 eps
+    u, parts = energy(Contribution(80, 20.0), 3, 10, 100, (0.3, 0.4, 0.3))
+    assert abs(u - (0.3 * 0.25 + 0.4 * 0.3 + 0.3 * 0.2)) < 1e-12
+    assert parts == {"fidelity": 0.25, "simplicity": 0.3, "completeness": 0.8}
+
+
+def test_rolled_seam_is_the_same_surface_shifted_in_v():
+    import torch
+
+    from nurbskit.fit.params import new_surface
+    from nurbskit.patches.refit import point_distances, rolled_seam
+
+    rng = np.random.default_rng(3)
+    cp = torch.as_tensor(rng.normal(size=(5, 7, 3)))
+    cp = torch.cat([cp, cp[:, :3]], dim=1)  # closed in v: 10 columns, 7 distinct
+    s = new_surface(cp, (3, 3), closed_v=True)
+    s2, shift = rolled_seam(s)
+    uv = torch.as_tensor(rng.random((50, 2)))
+    uv2 = uv.clone()
+    uv2[:, 1] = torch.remainder(uv[:, 1] + shift, 1.0)
+    assert float((s2.evaluate(uv) - s.evaluate(uv2)).abs().max()) < 1e-12
+    # points just across the seam are projected to their true foot point
+    near = s.evaluate(torch.tensor([[0.5, 0.995], [0.3, 0.004]], dtype=torch.float64)).numpy()
+    _, d = point_distances(s, near, closed_v=True)
+    assert d.max() < 1e-8
