@@ -238,3 +238,25 @@ def test_fit_and_volume_write_cad_formats(tmp_path):
     ours = read_nurbs(out / "surface.json")
     grid = torch.rand(50, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
     assert_close(back.evaluate(grid), ours.evaluate(grid), atol=1e-12)
+
+
+def test_patches_result_exports_to_step_and_reads_back_valid(tmp_path):
+    """A `nurbskit patches` result written as STEP (`--format step`) and read back by OCC."""
+    require_extra("OCP")
+    from nurbskit.io.cad import cad_info, read_cad
+
+    rng = np.random.default_rng(0)
+    pts, lab = [], []
+    for axis in range(3):  # the corner of a box: three perpendicular squares
+        p = rng.random((300, 3))
+        p[:, axis] = 0.0
+        pts.append(p)
+        lab += [axis] * 300
+    np.savetxt(tmp_path / "corner.xyzc", np.c_[np.vstack(pts), lab], fmt="%.9f %.9f %.9f %d")
+    out = tmp_path / "out"
+    assert main(["patches", str(tmp_path / "corner.xyzc"), "--out", str(out), "--quiet", "--no-figures",
+                 "--format", "step"]) == 0
+    info = cad_info(out / "patches.step")
+    assert info["valid"] and len(info["faces"]) == 3
+    model = read_cad(out / "patches.step")
+    assert all(face.outer is not None for face in model.faces)

@@ -65,7 +65,7 @@ def test_patches_writes_everything(box_corner, tmp_path, capsys):
         (["{cloud}", "--eps", "2"], "--eps: expected a fraction"),
         (["{cloud}", "--max-ctrl", "3"], "--max-ctrl"),
         (["{cloud}", "--init", "nothing.vg"], "--init: expected 'auto' or an existing .vg file"),
-        (["{cloud}", "--device", "tpu"], "--device must be cpu or cuda"),
+        (["{cloud}", "--device", "tpu"], "--device: expected cpu or cuda"),
     ],
 )
 def test_bad_input_is_one_line(box_corner, tmp_path, capsys, args, message):

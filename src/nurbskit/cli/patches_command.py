@@ -47,6 +47,9 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
+    from .export_command import add_format_option
+
+    add_format_option(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=run_patches)
@@ -117,20 +120,16 @@ def run_patches(args) -> int:
     from ..patches.planar import read_vg
 
     weights = parse_weights(args.weights)
-    if args.device.startswith("cuda"):
-        import torch
+    from ._options import parse_device
 
-        if not torch.cuda.is_available():
-            raise OptionError(f"--device {args.device}: torch sees no CUDA device on this machine")
-    elif args.device != "cpu":
-        raise OptionError(f"--device must be cpu or cuda[:N], got {args.device!r}")
+    parse_device(args.device)  # the one device parser: a device that exists here, or one line
     cfg = PatchConfig(eps=args.eps, weights=weights, max_ctrl=args.max_ctrl, seed=args.seed, device=args.device,
                       init=args.init)
     try:
         cfg.validate()
     except OptionError as exc:
         raise OptionError(f"--{str(exc).split(':')[0].replace('_', '-')}:{str(exc).split(':', 1)[1]}") from None
-    check_output_dir(args.out, args.overwrite)  # refuse a bad --out before the work
+    check_output_dir(args.out, args.overwrite, inputs=[args.input])  # refuse a bad --out before the work
     points, normals, labels = load_cloud(args.input, args.sample, args.seed)
     init_labels = None
     if args.init != "auto":
@@ -143,8 +142,13 @@ def run_patches(args) -> int:
         result = fit_patches(points, normals, cfg, init_labels=init_labels, truth=labels, progress=bars)
     finally:
         bars.close()
-    with output_directory(args.out, args.overwrite) as tmp:
+    with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         report = write_patch_outputs(result, tmp, figures=not args.no_figures, extra={"input": str(args.input)})
+        if args.export_format and result.faces:
+            from .export_command import write_result
+
+            write_result(result.faces, tmp / f"patches.{args.export_format}", format=args.export_format,
+                         tolerance=args.export_tolerance)
     m = report["metrics"]
     line = (
         f"{m['N']} patches from {result.planar['planes']} planes in {report['seconds']:.1f} s; "

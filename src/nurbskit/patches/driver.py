@@ -105,6 +105,11 @@ class PatchSet:
     def __len__(self) -> int:
         return len(self.patches)
 
+    @property
+    def faces(self) -> list[TrimmedSurface]:
+        """Every trimmed face of every patch, in patch order (what CAD exchange writes)."""
+        return [face for patch in self.patches for face in patch.faces]
+
 
 @dataclass
 class _Region:

@@ -47,54 +47,16 @@ class PatchFit:
 def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``.
 
-    The core's projection works on the box domain: on a surface closed in v a point whose
-    closest point lies just across the seam can stop on the seam itself (the v bound holds
-    it). With ``closed_v`` such points are projected again onto the same surface with its
-    seam turned half-way round (distinct control columns rolled, :func:`rolled_seam`) and
-    keep the closer answer.
+    The core's projection (:func:`nurbskit.core.project.project_points`); on a patch closed
+    in v its Newton steps cross the seam (``periodic=(False, True)``), so a point whose foot
+    point lies just across the seam does not stop on it.
     """
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     x = torch.as_tensor(points, dtype=surface.dtype, device=surface.device)
     with torch.no_grad():
-        proj = project_points(surface.detach(), x)
-    params = proj.params.cpu().double().numpy()
-    dist = proj.distance.cpu().double().numpy()
-    if closed_v:
-        (v0, v1) = surface.domain[1]
-        stuck = np.flatnonzero((params[:, 1] <= v0) | (params[:, 1] >= v1))
-        if len(stuck):
-            turned, shift = rolled_seam(surface)
-            with torch.no_grad():
-                again = project_points(turned, x[stuck])
-            d2 = again.distance.cpu().double().numpy()
-            p2 = again.params.cpu().double().numpy()
-            p2[:, 1] = v0 + np.mod(p2[:, 1] - v0 + shift, v1 - v0)
-            better = d2 < dist[stuck]
-            dist[stuck[better]], params[stuck[better]] = d2[better], p2[better]
-    return params, dist
-
-
-def rolled_seam(surface: NURBSSurface) -> tuple[NURBSSurface, float]:
-    """The same closed-in-v surface with its seam moved half-way round, and the v shift.
-
-    With uniform periodic knots (:func:`nurbskit.fit.params.periodic_knots`) and the last
-    ``q`` control columns repeating the first ``q``, rolling the ``m = n_v - q`` distinct
-    columns by ``k`` gives ``S'(u, v) = S(u, v + k / m)`` (mod the domain length).
-    """
-    q = surface.degrees[1]
-    n_v = surface.sizes[1]
-    m = n_v - q
-    k = m // 2
-    cp = surface.control_points.detach()[:, :m]
-    w = surface.weights.detach()[:, :m] if surface.weights is not None else None
-    cp = torch.roll(cp, -k, dims=1)
-    cp = torch.cat([cp, cp[:, :q]], dim=1)
-    if w is not None:
-        w = torch.roll(w, -k, dims=1)
-        w = torch.cat([w, w[:, :q]], dim=1)
-    (v0, v1) = surface.domain[1]
-    return NURBSSurface(cp, surface.degrees, surface.knot_vectors, w), (v1 - v0) * k / m
+        proj = project_points(surface.detach(), x, periodic=(False, bool(closed_v)))
+    return proj.params.cpu().double().numpy(), proj.distance.cpu().double().numpy()
 
 
 def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
@@ -137,9 +99,9 @@ def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iter
         alternation=dataclasses.replace(base.alternation, rounds=cfg.fit_rounds),
         max_points=0,
         seed=cfg.seed,
-        device=cfg.device,
     ).with_iters(cfg.fit_iters if iters is None else iters)
-    result = fit_surface(torch.as_tensor(points, dtype=torch.float64), fit_cfg)
+    # the fit runs where its points are: cfg.device only moves them
+    result = fit_surface(torch.as_tensor(points, dtype=torch.float64).to(cfg.device), fit_cfg)
     return result.surface.to(device="cpu"), result.topology
 
 
