@@ -87,17 +87,22 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
+class _SecondPass(argparse.ArgumentParser):
+    """Parses what followed COMMAND; a mistake is an OptionError (one line, exit 2)."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        raise OptionError(message)
+
+
 def _split(args) -> tuple[argparse.Namespace, list[str]]:
     """The second parsing pass: INPUTS and batch options before ``--``, the command's after."""
-    from . import _Parser
-
     rest = list(args.rest)
     if "--" in rest:
         cut = rest.index("--")
         mine, command_options = rest[:cut], rest[cut + 1:]
     else:
         mine, command_options = rest, []
-    second = _Parser(prog=f"nurbskit batch {args.command}", add_help=False)
+    second = _SecondPass(prog=f"nurbskit batch {args.command}", add_help=False)
     second.add_argument("inputs", nargs="*")
     _add_options(second, suppress=True)
     second.parse_args(mine, namespace=args)
