@@ -54,11 +54,32 @@ def client():
     _require_dask()
     import psutil
 
+    before = {p.pid for p in _cluster_processes(os.getpid())}
     with runner.connect(workers=2, memory_limit="1.5GB", retries=0) as (dask_client, info):
-        pids = [p.pid for p in psutil.Process().children(recursive=True)]
+        started = [p for p in _cluster_processes(os.getpid()) if p.pid not in before]
+        assert len(started) >= 2
         yield dask_client
-    gone, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=20)
+    gone, alive = psutil.wait_procs(started, timeout=30)
     assert alive == [], f"processes left after the cluster closed: {alive}"
+
+
+def _cluster_processes(pid: int) -> list:
+    """Descendants of ``pid`` except multiprocessing's resource tracker (one per Python
+    process that ever spawned a child; it ends with that process, not with the cluster)."""
+    import psutil
+
+    out = []
+    try:
+        children = psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+    for p in children:
+        try:
+            if "resource_tracker" not in " ".join(p.cmdline()):
+                out.append(p)
+        except psutil.NoSuchProcess:
+            pass
+    return out
 
 
 # --- the probe command (runs inside the workers: importable as this module) ------------------
@@ -246,15 +267,6 @@ def _env():
     return env
 
 
-def _descendants(pid: int) -> list:
-    import psutil
-
-    try:
-        return psutil.Process(pid).children(recursive=True)
-    except psutil.NoSuchProcess:
-        return []
-
-
 def test_local_cluster_processes_end_with_the_run(tmp_path):
     _require_dask()
     import psutil
@@ -264,7 +276,7 @@ def test_local_cluster_processes_end_with_the_run(tmp_path):
 
     def progress(event):
         if event["event"] == "started":
-            seen.extend(psutil.Process().children(recursive=True))
+            seen.extend(_cluster_processes(os.getpid()))
             assert event["workers"] == 2 and event["scheduler"].startswith("tcp://127.0.0.1:")
 
     records = nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", workers=2, progress=progress)
@@ -294,7 +306,7 @@ def test_ctrl_c_ends_every_process_and_leaves_no_half_written_output(clouds, tmp
             time.sleep(0.2)
         assert any("scheduler tcp://" in ln for ln in lines), lines
         time.sleep(1.0)
-        started = _descendants(proc.pid)
+        started = _cluster_processes(proc.pid)
         assert len(started) >= 2
         os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
         assert proc.wait(timeout=90) == 130
@@ -357,7 +369,7 @@ def test_existing_scheduler_and_worker_through_the_cli(tmp_path, monkeypatch):
     finally:
         everything = [psutil.Process(p.pid) for p in procs if p.poll() is None]
         for p in list(everything):
-            everything += _descendants(p.pid)
+            everything += _cluster_processes(p.pid)
         for p in procs:
             if p.poll() is None:
                 os.killpg(p.pid, signal.SIGTERM)
