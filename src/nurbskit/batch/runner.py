@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import pickle
 import time
 import uuid
 from pathlib import Path
@@ -33,7 +34,7 @@ from ..errors import OptionError
 from .commands import BatchCommand, Item, get_command
 from .inputs import find_items
 from .summary import write_summary
-from .task import MARKER, command_args, fingerprint, read_marker, run_item
+from .task import MARKER, command_args, fingerprint, packed_task, read_marker
 
 EXTRA = "dist"
 
@@ -295,27 +296,58 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
     return ordered
 
 
+def window_size(client) -> int:
+    """How many items may wait on the scheduler at once: 4 per worker thread, at least 32.
+
+    The rest wait in this process, as :class:`Item` objects of a few hundred bytes:
+    a scheduler holds about 28 kB per task (measured, ``benchmarks/bench_batch.py``), so
+    10,000 items submitted at once would take 340 MB of it; a window keeps the scheduler's
+    memory flat however many inputs there are, and every worker still has its next item
+    waiting on the scheduler when it finishes one.
+    """
+    try:
+        threads = sum(client.nthreads().values())
+    except Exception:  # noqa: BLE001 - a window size, never a reason to fail
+        threads = 0
+    return max(32, 4 * threads)
+
+
 def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
-    """Submit one task per item and collect the records as they finish."""
+    """Submit one task per item (a window at a time) and collect the records as they finish."""
+    from collections import deque
+
     distributed = _distributed()
     token = uuid.uuid4().hex[:8]
-    keys = [f"nurbskit-{command.name}-{token}-{i}" for i in range(len(todo))]
-    futures = client.map(run_item, todo, keys, key=keys, pure=False, command=command, out_root=str(out),
-                         options=list(options), threads=threads, timeout=timeout)
-    by_key = dict(zip(keys, todo))
-    pending = set(keys)
+    queue = deque(enumerate(todo))
+    in_flight: dict[str, tuple] = {}
+    ac = distributed.as_completed([], with_results=False, loop=client.loop)
     failed = sum(r["status"] != "ok" for r in records.values())
     retries_hint = f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None else "no retries left"
-    ac = distributed.as_completed(futures, with_results=False, loop=client.loop)
+    window = window_size(client)
+
+    def top_up():
+        batch = [queue.popleft() for _ in range(min(len(queue), window - len(in_flight)))]
+        if not batch:
+            return
+        keys = [f"nurbskit-{command.name}-{token}-{i}" for i, _ in batch]
+        items = [item for _, item in batch]
+        payloads = [packed_task(item, k, command=command, out_root=str(out), options=list(options), threads=threads,
+                                timeout=timeout) for item, k in zip(items, keys)]
+        futures = client.map(pickle.loads, payloads, key=keys, pure=False)
+        for future, item in zip(futures, items):
+            in_flight[future.key] = (future, item)
+            ac.add(future)
+
     last_poll, running = 0.0, 0
     try:
-        while not ac.is_empty():
+        top_up()
+        while in_flight:
             batch = ac.next_batch(block=False)
             finished = [f for f in batch if f.status == "finished"]
             results = client.gather(finished, errors="skip") if finished else []
             got = {f.key: r for f, r in zip(finished, results)} if len(results) == len(finished) else {}
             for future in batch:
-                item = by_key[future.key]
+                _, item = in_flight.pop(future.key)
                 record = got.get(future.key)
                 if record is None:
                     if future.status == "finished":
@@ -328,22 +360,24 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
                 record["resumed"] = False
                 records[item.name] = record
                 failed += record["status"] != "ok"
-                pending.discard(future.key)
                 notify({"event": "result", "record": record})
             if batch:
+                top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
                 continue
             now = time.monotonic()
             if now - last_poll > 1.0:
                 last_poll = now
                 with contextlib.suppress(Exception):
-                    running = sum(1 for keys_ in client.processing().values() for k in keys_ if k in pending)
+                    running = sum(1 for keys_ in client.processing().values() for k in keys_ if k in in_flight)
+                window = window_size(client)  # workers may have come or gone
+                top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
             time.sleep(0.05)
     finally:
-        if pending:
+        if in_flight:
             with contextlib.suppress(Exception):
-                client.cancel([f for f in futures if f.key in pending])
+                client.cancel([f for f, _ in in_flight.values()])
 
 
 __all__ = ["run", "connect", "completed", "dashboard_link", "usable_cores", "MARKER"]

@@ -108,10 +108,11 @@ def read_marker(folder: str | os.PathLike) -> dict | None:
     return marker if isinstance(marker, dict) and marker.get("version") == MARKER_VERSION else None
 
 
-def one_line(text: str, limit: int = 400) -> str:
-    """An error message as one line (the last non-empty line of several), at most ``limit`` characters."""
+def one_line(text: str, limit: int = 400, last: bool = False) -> str:
+    """An error message as one line, at most ``limit`` characters: the first non-empty line
+    of several (an exception's summary), or the ``last`` (what a command printed last)."""
     lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
-    line = lines[-1] if lines else ""
+    line = (lines[-1] if last else lines[0]) if lines else ""
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
@@ -229,7 +230,7 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
             with _torch_threads(threads), contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
                 code = int(args.run(args) or 0)
             if code != 0:
-                raise _CommandFailed(one_line(stderr.getvalue()) or f"{command.name} exited with status {code}")
+                raise _CommandFailed(one_line(stderr.getvalue(), last=True) or f"{command.name} exited with status {code}")
             with open(out_dir / command.report, encoding="utf-8") as handle:
                 metrics = command.metrics(json.load(handle))
         record.update(status="ok", metrics=metrics, seconds=time.perf_counter() - start)
@@ -245,6 +246,34 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
         record["error"] = describe_error(exc)
     record["seconds"] = time.perf_counter() - start
     return record
+
+
+def _run_item_now(args: tuple, kwargs: dict) -> dict:
+    return run_item(*args, **kwargs)
+
+
+class _RunOnLoad:
+    """Pickles as "call :func:`run_item` with these arguments" (see :func:`packed_task`)."""
+
+    def __init__(self, args: tuple, kwargs: dict):
+        self.args, self.kwargs = args, kwargs
+
+    def __reduce__(self):
+        return _run_item_now, (self.args, self.kwargs)
+
+
+def packed_task(*args, **kwargs) -> bytes:
+    """``run_item(*args, **kwargs)`` as bytes that run it when unpickled.
+
+    The batch submits ``pickle.loads(packed_task(...))``: the scheduler, which unpickles
+    every task it receives, then sees only the standard library's ``pickle.loads`` and a
+    bytes argument, and so never imports nurbskit (nor torch: 240 MB of scheduler memory,
+    measured) and needs nothing but Dask installed; the worker's ``pickle.loads`` imports
+    nurbskit and runs the item.
+    """
+    import pickle
+
+    return pickle.dumps(_RunOnLoad(args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
 
 
 class _CommandFailed(Exception):
