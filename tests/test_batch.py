@@ -283,8 +283,15 @@ def test_local_cluster_processes_end_with_the_run(tmp_path):
     assert [r["status"] for r in records] == ["ok", "ok"]
     assert {r["metrics"]["pid"] for r in records} <= {p.pid for p in seen}  # the items ran in those processes
     assert len(seen) >= 2
-    gone, alive = psutil.wait_procs(seen, timeout=20)
-    assert alive == [], f"left running: {alive}"
+    gone, alive = psutil.wait_procs(seen, timeout=30)
+    assert alive == [], f"left running: {[(p.pid, _cmdline(p)) for p in alive]}"
+
+
+def _cmdline(p) -> str:
+    try:
+        return " ".join(p.cmdline())[:200]
+    except Exception:  # noqa: BLE001 - a diagnostic only
+        return "?"
 
 
 def test_ctrl_c_ends_every_process_and_leaves_no_half_written_output(clouds, tmp_path):
