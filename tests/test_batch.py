@@ -490,3 +490,17 @@ def test_parsers_reuse_the_single_command(tmp_path):
     with pytest.raises(OptionError, match="--iters"):
         command_args(get_command("fit"), item, tmp_path / "c", ["--iters", "many"])
     assert isinstance(args, argparse.Namespace)
+
+
+def test_summary_rows_and_aggregate():
+    from nurbskit.batch.summary import aggregate, flat_rows
+
+    records = [
+        {"input": "a", "name": "a", "status": "ok", "error": "", "seconds": 1.0, "metrics": {"m": 1.0, "k": 4.0}},
+        {"input": "b", "name": "b", "status": "ok", "error": "", "seconds": 2.0, "metrics": {"m": 3.0}, "resumed": True},
+        {"input": "c", "name": "c", "status": "failed", "error": "x", "seconds": 0.5, "metrics": {}},
+    ]
+    rows = flat_rows(records)
+    assert [r["m"] for r in rows][:2] == [1.0, 3.0] and np.isnan(rows[2]["m"]) and np.isnan(rows[1]["k"])
+    total = aggregate(records)
+    assert (total["status"], total["seconds"], total["m"], total["k"], total["resumed"]) == ("2 ok, 1 failed", 3.5, 2.0, 4.0, 1)

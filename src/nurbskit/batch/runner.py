@@ -289,7 +289,11 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
             r.setdefault("resumed", False)
         write_summary(out, ordered, meta, figure=figure and not interrupted)
     if dataframe:
-        pandas = require("pandas", "dev", "a DataFrame summary")
+        try:
+            import pandas
+        except ImportError:
+            raise OptionError("dataframe=True needs pandas (pip install pandas); the summary is also in "
+                              f"{out / 'summary.csv'}") from None
         from .summary import flat_rows
 
         return pandas.DataFrame(flat_rows(ordered))

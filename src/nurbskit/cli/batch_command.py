@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 
 from ..errors import OptionError
 
@@ -162,7 +163,9 @@ def run(args) -> int:
     get_command(args.command)
     args, command_options = _split(args)
     bar = _Bar(args.quiet)
-    previous = signal.signal(signal.SIGTERM, _sigterm_as_interrupt)  # `kill` cleans up like Ctrl-C
+    main_thread = threading.current_thread() is threading.main_thread()
+    # `kill` (SIGTERM) cleans up like Ctrl-C; signal handlers can only be set from the main thread.
+    previous = signal.signal(signal.SIGTERM, _sigterm_as_interrupt) if main_thread else None
     try:
         records = run_batch(
             args.command, args.inputs, args.out, options=command_options, workers=args.workers,
@@ -172,7 +175,8 @@ def run(args) -> int:
         )
     finally:
         bar.close()
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     ok = sum(r["status"] == "ok" for r in records)
     resumed = sum(bool(r.get("resumed")) for r in records)
     failed = len(records) - ok
