@@ -168,7 +168,7 @@ def _failure_message(exc: BaseException, client, memory_limit, retries_hint: str
             for _, event in client.get_events("worker-restart-memory"):
                 if worker is not None and event.get("worker") == worker:
                     return (f"worker killed for memory: it used {event.get('rss', 0) / 2**30:.2f} GiB, over 95% of "
-                            f"--memory-limit {memory_limit} ({retries_hint})")
+                            f"{memory_limit} ({retries_hint})")
         return f"worker process died while running this input ({retries_hint})"
     from .task import describe_error
 
@@ -249,6 +249,14 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
         raise OptionError(f"--out {out}: directory exists and is not empty; pass --resume to continue it "
                           f"or --overwrite to run every input again")
     _distributed()  # a missing extra fails before any work, whatever there is to do
+    if client is None and scheduler is None:
+        _memory_bytes(memory_limit)  # a bad size fails now, before --out is created
+    if dataframe:
+        try:
+            import pandas
+        except ImportError:
+            raise OptionError("dataframe=True needs pandas (pip install pandas); "
+                              "without it the summary is a list of dicts and summary.csv") from None
     notify = progress or (lambda event: None)
 
     records: dict[str, dict] = {}
@@ -272,8 +280,9 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
                 meta["dashboard"] = dashboard_link(dask_client, info["cluster"] == "local")
                 notify({"event": "started", "dashboard": meta["dashboard"], "scheduler": info["scheduler"],
                         "total": len(items), "resumed": len(records), **{k: v for k, v in info.items() if k == "workers"}})
+                limit = f"--memory-limit {memory_limit}" if info["cluster"] == "local" else "its memory limit"
                 _follow(dask_client, command, todo, out, options, threads_per_worker, timeout, records,
-                        notify, len(items), memory_limit, retries)
+                        notify, len(items), limit, retries if info["cluster"] == "local" else None)
     except KeyboardInterrupt:
         interrupted = True
         raise
@@ -289,11 +298,6 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
             r.setdefault("resumed", False)
         write_summary(out, ordered, meta, figure=figure and not interrupted)
     if dataframe:
-        try:
-            import pandas
-        except ImportError:
-            raise OptionError("dataframe=True needs pandas (pip install pandas); the summary is also in "
-                              f"{out / 'summary.csv'}") from None
         from .summary import flat_rows
 
         return pandas.DataFrame(flat_rows(ordered))
@@ -326,7 +330,8 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
     in_flight: dict[str, tuple] = {}
     ac = distributed.as_completed([], with_results=False, loop=client.loop)
     failed = sum(r["status"] != "ok" for r in records.values())
-    retries_hint = f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None else "no retries left"
+    retries_hint = (f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None
+                    else "attempts as the scheduler's allowed-failures permits")
     window = window_size(client)
 
     def top_up():
