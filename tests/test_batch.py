@@ -504,3 +504,34 @@ def test_summary_rows_and_aggregate():
     assert [r["m"] for r in rows][:2] == [1.0, 3.0] and np.isnan(rows[2]["m"]) and np.isnan(rows[1]["k"])
     total = aggregate(records)
     assert (total["status"], total["seconds"], total["m"], total["k"], total["resumed"]) == ("2 ok, 1 failed", 3.5, 2.0, 4.0, 1)
+
+
+def test_deadline_interrupts_python_loops_and_leaves_no_stray_exception():
+    from nurbskit.batch.task import TaskTimeout, deadline
+
+    with pytest.raises(TaskTimeout):
+        with deadline(0.2):
+            while True:
+                time.sleep(0.001)
+    with deadline(5.0):  # finishes in time: nothing is raised, then or later
+        total = sum(range(1000))
+    for _ in range(200):
+        time.sleep(0.001)
+    assert total == 499500
+
+
+def test_run_item_in_process_records_and_marker(tmp_path):
+    from nurbskit.batch.task import read_marker, run_item
+
+    inputs = _probes(tmp_path / "in", {"good": "abc", "bad": "bad", "slow": "loop"})
+    items = {i.name: i for i in find_items([inputs], PROBE)}
+    out = tmp_path / "out"
+    ok = run_item(items["good"], command=PROBE, out_root=str(out), options=["--scale", "0.5"], threads=1)
+    assert (ok["status"], ok["error"], ok["metrics"]["value"]) == ("ok", "", 1.5)
+    marker = read_marker(out / "good")
+    assert marker["command"] == "probe" and marker["options"] == ["--scale", "0.5"] and marker["record"]["status"] == "ok"
+    bad = run_item(items["bad"], command=PROBE, out_root=str(out), options=[], threads=1)
+    assert bad["status"] == "failed" and bad["error"].endswith("bad.probe: not a probe")
+    slow = run_item(items["slow"], command=PROBE, out_root=str(out), options=[], threads=1, timeout=0.3)
+    assert slow["error"] == "timed out after 0.3 s (--timeout)"
+    assert sorted(p.name for p in out.iterdir()) == ["good"]
