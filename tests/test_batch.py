@@ -535,3 +535,22 @@ def test_run_item_in_process_records_and_marker(tmp_path):
     slow = run_item(items["slow"], command=PROBE, out_root=str(out), options=[], threads=1, timeout=0.3)
     assert slow["error"] == "timed out after 0.3 s (--timeout)"
     assert sorted(p.name for p in out.iterdir()) == ["good"]
+
+
+def test_resume_trusts_only_a_matching_marker(tmp_path):
+    from nurbskit.batch.task import run_item
+
+    inputs = _probes(tmp_path / "in", {"good": "abc", "half": "xy"})
+    items = {i.name: i for i in find_items([inputs], PROBE)}
+    out = tmp_path / "out"
+    run_item(items["good"], command=PROBE, out_root=str(out), options=["--scale", "2"])
+    (out / "half").mkdir()  # an output without its marker: an earlier run stopped before the end
+    (out / "half" / "report.json").write_text("{}")
+    assert runner.completed(PROBE, items["half"], out, ["--scale", "2"]) is None
+    record = runner.completed(PROBE, items["good"], out, ["--scale", "2"])
+    assert record["resumed"] is True and record["metrics"]["value"] == 6.0
+    with pytest.raises(OptionError, match="--overwrite"):
+        runner.completed(PROBE, items["good"], out, ["--scale", "3"])
+    path = Path(items["good"].paths[0])
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))  # the input changed
+    assert runner.completed(PROBE, items["good"], out, ["--scale", "2"]) is None
