@@ -82,10 +82,11 @@ def register(subparsers) -> None:
             "COMMAND. A failed input is recorded and does not stop the others. Needs the [dist] extra."
         ),
     )
-    p.add_argument("command", metavar="COMMAND", help=f"one of: {names}")
+    # dest is not "command": the top-level parser's error prefix reads args.command ("nurbskit batch: ...")
+    p.add_argument("batch_command", metavar="COMMAND", help=f"one of: {names}")
     p.add_argument("rest", nargs=argparse.REMAINDER, metavar="INPUTS...", help="inputs, batch options, then -- and the command's options")
     _add_options(p, suppress=False)
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, batch_parser=p)
 
 
 class _SecondPass(argparse.ArgumentParser):
@@ -103,7 +104,7 @@ def _split(args) -> tuple[argparse.Namespace, list[str]]:
         mine, command_options = rest[:cut], rest[cut + 1:]
     else:
         mine, command_options = rest, []
-    second = _SecondPass(prog=f"nurbskit batch {args.command}", add_help=False)
+    second = _SecondPass(prog=f"nurbskit batch {args.batch_command}", add_help=False)
     second.add_argument("inputs", nargs="*")
     _add_options(second, suppress=True)
     second.parse_args(mine, namespace=args)
@@ -160,7 +161,11 @@ def run(args) -> int:
     from ..batch import run as run_batch
     from ..batch.commands import get_command
 
-    get_command(args.command)
+    rest_before = args.rest[: args.rest.index("--")] if "--" in args.rest else args.rest
+    if "-h" in rest_before or "--help" in rest_before:
+        args.batch_parser.print_help()
+        return 0
+    get_command(args.batch_command)
     args, command_options = _split(args)
     bar = _Bar(args.quiet)
     main_thread = threading.current_thread() is threading.main_thread()
@@ -168,7 +173,7 @@ def run(args) -> int:
     previous = signal.signal(signal.SIGTERM, _sigterm_as_interrupt) if main_thread else None
     try:
         records = run_batch(
-            args.command, args.inputs, args.out, options=command_options, workers=args.workers,
+            args.batch_command, args.inputs, args.out, options=command_options, workers=args.workers,
             threads_per_worker=args.threads_per_worker, memory_limit=args.memory_limit, scheduler=args.scheduler,
             retries=args.retries, timeout=args.timeout, resume=args.resume, overwrite=args.overwrite,
             figure=not args.no_figure, progress=bar,
