@@ -233,15 +233,18 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
                 raise _CommandFailed(one_line(stderr.getvalue(), last=True) or f"{command.name} exited with status {code}")
             with open(out_dir / command.report, encoding="utf-8") as handle:
                 metrics = command.metrics(json.load(handle))
-        record.update(status="ok", metrics=metrics, seconds=time.perf_counter() - start)
+        done = {**record, "status": "ok", "metrics": metrics, "seconds": time.perf_counter() - start}
         marker = {"version": MARKER_VERSION, "command": command.name, "options": list(options),
-                  "inputs": fingerprint(item), "record": record}
+                  "inputs": fingerprint(item), "record": done}
         with atomic_open(out_dir / MARKER, encoding="utf-8") as handle:
             json.dump(marker, handle, indent=1)
+        record = done  # ok only once the marker is written
     except TaskTimeout:
         record["error"] = f"timed out after {timeout:g} s (--timeout)"
     except _CommandFailed as exc:
         record["error"] = str(exc)
+    except SystemExit as exc:  # a command that calls sys.exit must not end the worker
+        record["error"] = f"{command.name} exited with status {exc.code}"
     except Exception as exc:  # noqa: BLE001 - any failure of one item is recorded, never raised
         record["error"] = describe_error(exc)
     record["seconds"] = time.perf_counter() - start
