@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import socket
 import subprocess
 import sys
@@ -128,18 +129,20 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def scheduler_memory(n: int = 10_000, all_at_once: bool = False) -> dict:
+def scheduler_memory(n: int = 10_000, all_at_once: bool = False, packed: bool = True) -> dict:
     """Scheduler RSS with ``n`` inputs queued (no worker, so nothing runs).
 
     ``all_at_once``: submit the same ``n`` tasks with one ``client.map`` (the reference
-    that :func:`nurbskit.batch.runner.window_size` avoids) instead of ``nurbskit.batch.run``.
+    that :func:`nurbskit.batch.runner.window_size` avoids) instead of ``nurbskit.batch.run``;
+    ``packed=False``: as plain ``run_item`` calls, which the scheduler unpickles into
+    nurbskit objects (so it imports nurbskit and torch), instead of ``packed_task`` bytes.
     """
     import psutil
     from distributed import Client
 
     import nurbskit.batch
     from nurbskit.batch import BatchCommand, find_items
-    from nurbskit.batch.task import run_item
+    from nurbskit.batch.task import packed_task, run_item
 
     command = BatchCommand(name="noop", module="bench_batch", extensions=(".in",), metrics=_no_metrics)
     port = _free_port()
@@ -174,7 +177,11 @@ def scheduler_memory(n: int = 10_000, all_at_once: bool = False) -> dict:
 
             if all_at_once:
                 items = find_items([folder], command)
-                futures = watcher.map(run_item, items, pure=False, command=command, out_root=str(Path(tmp) / "out"))
+                if packed:
+                    payloads = [packed_task(it, command=command, out_root=str(Path(tmp) / "out")) for it in items]
+                    futures = watcher.map(pickle.loads, payloads, pure=False)
+                else:
+                    futures = watcher.map(run_item, items, pure=False, command=command, out_root=str(Path(tmp) / "out"))
                 deadline = time.monotonic() + 120
                 while tasks_on_scheduler() < n and time.monotonic() < deadline:
                     time.sleep(0.5)
@@ -191,7 +198,9 @@ def scheduler_memory(n: int = 10_000, all_at_once: bool = False) -> dict:
     finally:
         proc.terminate()
         proc.wait(timeout=30)
-    return {"inputs": n, "how": "client.map, all at once" if all_at_once else "nurbskit.batch.run (window)",
+    how = "nurbskit.batch.run (window)" if not all_at_once else \
+        f"client.map, all at once, {'packed bytes' if packed else 'run_item objects'}"
+    return {"inputs": n, "how": how,
             "scheduler_rss_before_mb": before / 2**20, "scheduler_rss_queued_mb": seen["rss"] / 2**20,
             "per_input_kb": (seen["rss"] - before) / n / 1024, "tasks_on_scheduler": seen["tasks"]}
 
@@ -211,6 +220,7 @@ def main() -> None:
     ok = [sum(r["status"] == "ok" for r in recs) for recs in (loop_records, one["records"], two["records"])]
     result["memory"] = scheduler_memory()
     result["memory_all_at_once"] = scheduler_memory(all_at_once=True)
+    result["memory_all_at_once_unpacked"] = scheduler_memory(all_at_once=True, packed=False)
     load_after = os.getloadavg()
     rows = [
         {"run": "API in a loop (this process)", "workers": 0, "items": n, "ok": ok[0], "wall_s": loop_t,
@@ -233,7 +243,8 @@ def main() -> None:
         # Load-independent: on 1 worker the items run one after another, so the wall time
         # not spent inside run_item (scheduling, transfer, polling) is the batch's own cost.
         "dispatch_overhead_per_item_s_1_worker": (one["wall_seconds"] - sum(r["seconds"] for r in one["records"])) / n,
-        "scheduler_memory": mem, "scheduler_memory_all_at_once": result["memory_all_at_once"], "goal_scheduler_mb": 300,
+        "scheduler_memory": mem, "scheduler_memory_all_at_once": result["memory_all_at_once"],
+        "scheduler_memory_all_at_once_unpacked": result["memory_all_at_once_unpacked"], "goal_scheduler_mb": 300,
         "load_average_before": load_before, "load_average_after": load_after, "cpu_count": os.cpu_count(),
         "contended": max(load_before[0], load_after[0]) > (os.cpu_count() or 1),
         "item_seconds": {name: [r["seconds"] for r in recs] for name, recs in
@@ -247,7 +258,9 @@ def main() -> None:
         f"**{meta['dispatch_overhead_per_item_s_1_worker']:.3f} s** per item (does not depend on load). Scheduler with 10,000 queued inputs: **{mem['scheduler_rss_queued_mb']:.0f} MB** "
         f"({mem['scheduler_rss_before_mb']:.0f} MB empty; {mem['tasks_on_scheduler']} tasks on it at a time, the rest "
         f"queued in the client; submitted all at once they take "
-        f"{result['memory_all_at_once']['scheduler_rss_queued_mb']:.0f} MB; goal < 300 MB). "
+        f"{result['memory_all_at_once']['scheduler_rss_queued_mb']:.0f} MB packed, "
+        f"{result['memory_all_at_once_unpacked']['scheduler_rss_queued_mb']:.0f} MB as nurbskit objects "
+        f"(the scheduler then imports torch); goal < 300 MB). "
         f"Load average before/after: {load_before[0]:.1f} / {load_after[0]:.1f} on {os.cpu_count()} cores"
         + (" -- CONTENDED: the machine was shared; re-run quiet for the scaling ratio." if meta["contended"] else ".")
         + " 'overhead_per_item_s' for 2 workers is 2 x wall - loop, per item (worker-seconds spent beyond the loop's)."
@@ -261,5 +274,21 @@ def main() -> None:
     print(json.dumps(mem, indent=1))
 
 
+def memory_only() -> None:
+    """``--memory-only``: the scheduler-memory variants alone (a minute; no fitting)."""
+    from _harness import write_results
+
+    rows = [scheduler_memory(), scheduler_memory(all_at_once=True), scheduler_memory(all_at_once=True, packed=False)]
+    columns = [("how", "submitted as"), ("inputs", "inputs"), ("tasks_on_scheduler", "tasks on the scheduler"),
+               ("scheduler_rss_before_mb", "scheduler MB empty"), ("scheduler_rss_queued_mb", "scheduler MB queued"),
+               ("per_input_kb", "kB per input")]
+    notes = ("Scheduler resident memory (psutil) with 10,000 inputs queued and no worker. Goal < 300 MB. "
+             "Packed: tasks travel as bytes the scheduler never turns into nurbskit objects.")
+    print(write_results("batch_memory", rows, columns, title="nurbskit batch: scheduler memory", notes=notes).read_text())
+
+
 if __name__ == "__main__":
-    main()
+    if "--memory-only" in sys.argv:
+        memory_only()
+    else:
+        main()
