@@ -308,10 +308,10 @@ def window_size(client) -> int:
     """How many items may wait on the scheduler at once: 4 per worker thread, at least 32.
 
     The rest wait in this process, as :class:`Item` objects of a few hundred bytes:
-    a scheduler holds about 28 kB per task (measured, ``benchmarks/bench_batch.py``), so
-    10,000 items submitted at once would take 340 MB of it; a window keeps the scheduler's
-    memory flat however many inputs there are, and every worker still has its next item
-    waiting on the scheduler when it finishes one.
+    a scheduler holds about 3.7 kB per queued task (measured, ``benchmarks/bench_batch.py``),
+    so a window keeps its memory flat however many inputs there are (68 MB with 10,000
+    queued, as empty), and every worker still has its next item waiting on the scheduler
+    when it finishes one.
     """
     try:
         threads = sum(client.nthreads().values())
