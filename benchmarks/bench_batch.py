@@ -28,7 +28,8 @@ Timings on the shared 2-core machine are contended (load is recorded with each r
 the ratio of 2 to 1 workers is the number to re-run on a quiet machine. Memory and
 counts do not depend on load.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 5-15 minutes).
+Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 5 minutes on a quiet
+2-core machine, 30 contended; ``--quick``: 6 inputs; ``--memory-only``: the memory part).
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ FIT_OPTIONS = ["--iters", "40", "--max-points", "3000", "--no-figures"]
 
 
 def inputs() -> list[Path]:
+    if not DATA.is_dir():
+        raise SystemExit(f"bench_batch: needs {DATA} (the ABC clouds and thesis meshes)")
     abc = sorted((DATA / "abc").glob("*.xyzc"))
     thesis = sorted((DATA / "thesis_nurbsdiff" / "meshes").glob("*.off")) + \
         sorted((DATA / "thesis_nurbsdiff" / "pointclouds_rows").glob("*.txt"))
@@ -209,6 +212,9 @@ def main() -> None:
     from _harness import write_results
 
     files = inputs()
+    if "--quick" in sys.argv:  # make bench --quick: 2 ABC clouds and 4 thesis inputs, few iterations
+        files = files[:2] + files[6:10]
+        FIT_OPTIONS[:] = ["--iters", "10", "--max-points", "1000", "--no-figures"]
     load_before = os.getloadavg()
     result = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -251,7 +257,7 @@ def main() -> None:
                          (("loop", loop_records), ("one", one["records"]), ("two", two["records"]))},
     }
     notes = (
-        f"26 inputs (6 ABC clouds, 20 thesis meshes/clouds) through `nurbskit batch fit` {' '.join(FIT_OPTIONS)}. "
+        f"{n} inputs (ABC clouds, thesis meshes/clouds) through `nurbskit batch fit` {' '.join(FIT_OPTIONS)}. "
         f"Throughput 2 vs 1 workers: **{speedup:.2f}x** (goal >= 1.7x). Per-item overhead against the API in a loop: "
         f"**{meta['overhead_per_item_s_warm']:.3f} s** warm, {cold:.3f} s counting cluster start and warm-up "
         f"(goal <= 0.3 s); on 1 worker, wall time outside the items: "
