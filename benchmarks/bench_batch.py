@@ -274,7 +274,8 @@ def main() -> None:
     columns = [("run", "run"), ("workers", "workers"), ("items", "items"), ("ok", "ok"), ("wall_s", "wall s"),
                ("items_per_s", "items/s"), ("start_s", "cluster start + warm-up s"),
                ("overhead_per_item_s", "overhead per item s")]
-    path = write_results("batch", rows, columns, meta=meta, title="nurbskit batch: 1 vs 2 workers, overhead, memory",
+    name = "batch_quick" if "--quick" in sys.argv else "batch"  # a quick run never replaces the full one
+    path = write_results(name, rows, columns, meta=meta, title="nurbskit batch: 1 vs 2 workers, overhead, memory",
                          notes=notes)
     print(path.read_text())
     print(json.dumps(mem, indent=1))
