@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.studio_command",
     "nurbskit.cli.export_command",
     "nurbskit.cli.patches_command",
+    "nurbskit.cli.batch_command",
 )
 
 EXIT_BUG = 1

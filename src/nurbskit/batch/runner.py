@@ -1,0 +1,392 @@
+"""The client side of ``nurbskit batch``: find the work, start or join a Dask cluster,
+submit one task per item, follow them, write the summary.
+
+Convention (cluster):
+    Without ``client`` or ``scheduler``, a :class:`dask.distributed.LocalCluster` on
+    127.0.0.1: ``workers`` processes (default: usable cores // ``threads_per_worker``),
+    each running ONE item at a time with ``threads_per_worker`` torch threads (torch's
+    thread count is per process, and the fitting loops hold the GIL between operations,
+    so processes, not threads, are how items run side by side), each restarted by its
+    nanny when it passes 95 % of ``memory_limit``. The scheduler retries an item whose
+    worker died ``retries`` times (``distributed.scheduler.allowed-failures``) and sends
+    a worker no more items than it has threads (``worker-saturation`` 1.0), so a dying
+    worker takes down only the item it was running. The cluster and every process it
+    started are closed when :func:`run` returns or raises (Ctrl-C included).
+
+    With ``scheduler="tcp://host:port"`` (or a ``client``), the existing cluster is
+    used as it is: its workers' threads, memory limits and ``allowed-failures`` apply,
+    and it is left running.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import pickle
+import time
+import uuid
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+from .._optional import require
+from ..errors import OptionError
+from .commands import BatchCommand, Item, get_command
+from .inputs import find_items
+from .summary import write_summary
+from .task import MARKER, command_args, fingerprint, packed_task, read_marker
+
+EXTRA = "dist"
+
+
+def _distributed():
+    require("dask", EXTRA, "nurbskit batch")
+    return require("distributed", EXTRA, "nurbskit batch")
+
+
+def usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        return os.cpu_count() or 1
+
+
+def _check_positive(name: str, value, integer: bool = True, allow_zero: bool = False) -> None:
+    if value is None:
+        return
+    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+    low_ok = value >= 0 if allow_zero else value > 0
+    if not ok or isinstance(value, bool) or not low_ok or (not integer and not math.isfinite(value)):
+        kind = "an integer" if integer else "a number"
+        bound = ">= 0" if allow_zero else "> 0"
+        raise OptionError(f"--{name.replace('_', '-')}: expected {kind} {bound}, got {value!r}")
+
+
+def _memory_bytes(memory_limit) -> int | None:
+    """``"4GB"`` -> bytes; ``None``, ``"auto"`` or 0 -> None (Dask's share of the machine)."""
+    if memory_limit in (None, 0, "0", "auto"):
+        return None
+    if isinstance(memory_limit, (int, float)) and not isinstance(memory_limit, bool):
+        value = int(memory_limit)
+    else:
+        from dask.utils import parse_bytes
+
+        try:
+            value = int(parse_bytes(str(memory_limit)))
+        except (ValueError, TypeError):
+            raise OptionError(f"--memory-limit: expected a size like 4GB or 500MiB, got {memory_limit!r}") from None
+    if value <= 0:
+        raise OptionError(f"--memory-limit: expected a positive size, got {memory_limit!r}")
+    return value
+
+
+def _check_fits_in_memory(workers: int, limit: int | None) -> None:
+    """Refuse a local cluster whose memory limits add up to more than this machine has."""
+    if limit is None:
+        return
+    import psutil
+
+    total = psutil.virtual_memory().total
+    if workers * limit > total:
+        raise OptionError(
+            f"--memory-limit {limit / 2**30:.1f} GiB x {workers} workers = {workers * limit / 2**30:.1f} GiB, "
+            f"more than this machine's {total / 2**30:.1f} GiB; lower --workers or --memory-limit"
+        )
+
+
+@contextlib.contextmanager
+def connect(client=None, scheduler: str | None = None, *, workers: int | None = None, threads_per_worker: int = 1,
+            memory_limit="4GB", retries: int = 1):
+    """Yield ``(client, info)``: the given client, one connected to ``scheduler``, or a
+    new local cluster (see the module's Convention). What this opened, it closes."""
+    distributed = _distributed()
+    if client is not None:
+        yield client, {"cluster": "given", "scheduler": client.scheduler.address}
+        return
+    if scheduler is not None:
+        try:
+            with distributed.Client(scheduler, timeout="20s", set_as_default=False) as own:
+                yield own, {"cluster": "existing", "scheduler": scheduler}
+        except OSError as exc:  # not reachable in time
+            raise OptionError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        return
+    import logging
+
+    import dask
+
+    n = workers or max(1, usable_cores() // threads_per_worker)
+    limit = _memory_bytes(memory_limit)
+    _check_fits_in_memory(n, limit)
+    config = {
+        "distributed.scheduler.allowed-failures": retries,
+        "distributed.scheduler.worker-saturation": 1.0,
+        # the items are independent: nothing to steal or rebalance between workers
+        "distributed.scheduler.work-stealing": False,
+    }
+    with dask.config.set(config):
+        cluster = distributed.LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
+            dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
+            silence_logs=logging.CRITICAL,
+        )
+    try:
+        with distributed.Client(cluster, set_as_default=False) as own:
+            yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
+    finally:
+        cluster.close()
+
+
+def dashboard_link(client, local: bool) -> str | None:
+    """The dashboard's address, or None when the scheduler serves none.
+
+    A local scheduler serves the dashboard only with bokeh installed (without it the
+    address answers with a page asking for bokeh); a remote one is taken at its word.
+    """
+    import importlib.util
+
+    if local and importlib.util.find_spec("bokeh") is None:
+        return None
+    try:
+        info = client.scheduler_info()
+        if not info.get("services", {}).get("dashboard"):
+            return None
+        return client.dashboard_link
+    except Exception:  # noqa: BLE001 - an address to print, never a reason to fail
+        return None
+
+
+def _failure_message(exc: BaseException, client, memory_limit, retries_hint: str) -> str:
+    """One line for an item whose task erred on the scheduler's side (its worker died)."""
+    distributed = _distributed()
+    if isinstance(exc, distributed.KilledWorker):
+        worker = getattr(getattr(exc, "last_worker", None), "address", None)
+        with contextlib.suppress(Exception):
+            for _, event in client.get_events("nurbskit-batch-timeout"):
+                if event.get("key") == exc.task:
+                    return f"timed out after {event.get('seconds'):g} s (--timeout) and its worker had to be restarted"
+        with contextlib.suppress(Exception):
+            for _, event in client.get_events("worker-restart-memory"):
+                if worker is not None and event.get("worker") == worker:
+                    return (f"worker killed for memory: it used {event.get('rss', 0) / 2**30:.2f} GiB, over 95% of "
+                            f"{memory_limit} ({retries_hint})")
+        return f"worker process died while running this input ({retries_hint})"
+    from .task import describe_error
+
+    return describe_error(exc)
+
+
+def completed(command: BatchCommand, item: Item, out: Path, options: Sequence[str]) -> dict | None:
+    """The record of a finished item (``--resume``), or None when it has to run.
+
+    Raises OptionError when ``out`` holds a finished item made by another command or
+    with other options: resuming it would mix two different runs in one summary.
+    """
+    marker = read_marker(out / item.name)
+    if marker is None:
+        return None
+    if marker.get("command") != command.name or list(marker.get("options", [])) != list(options):
+        raise OptionError(
+            f"--resume: {out / item.name} was made by 'nurbskit batch {marker.get('command')}' with options "
+            f"{marker.get('options')}, not '{command.name}' with {list(options)}; use --overwrite to redo it"
+        )
+    if marker.get("inputs") != fingerprint(item):
+        return None  # an input changed since: fit it again
+    record = dict(marker.get("record", {}))
+    if record.get("status") != "ok":
+        return None
+    record.update(input=item.source, name=item.name, resumed=True)
+    return record
+
+
+def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str | os.PathLike, out: str | os.PathLike,
+        client=None, *, options: Sequence[str] = (), workers: int | None = None, threads_per_worker: int = 1,
+        memory_limit="4GB", scheduler: str | None = None, retries: int = 1, timeout: float | None = None,
+        resume: bool = False, overwrite: bool = False, figure: bool = True,
+        progress: Callable[[dict], None] | None = None, dataframe: bool = False):
+    """Run ``command`` on every input on a Dask cluster; the summary records.
+
+    Args:
+        command: a registered command name (``"fit"``, ``"volume"``) or a :class:`BatchCommand`.
+        inputs: files, folders (searched by the command's extensions) and glob patterns.
+        out: the output folder; item ``x`` goes to ``out/x/`` as the single command writes it.
+        client: a ``distributed.Client`` to use (left open); else ``scheduler`` or a local cluster.
+        options: the single command's options, e.g. ``["--iters", "50"]``.
+        workers, threads_per_worker, memory_limit, retries: the local cluster (module Convention).
+        timeout: seconds allowed per item (None: no limit).
+        resume: skip items whose output is complete (their folders are not touched).
+        overwrite: run every item again, replacing its folder.
+        figure: also write ``summary.png``.
+        progress: called with dicts: ``{"event": "started", "dashboard", "scheduler", "total",
+            "resumed"}``, ``{"event": "update", "done", "failed", "running", "total"}`` and
+            ``{"event": "result", "record"}``.
+        dataframe: return a pandas DataFrame (needs pandas) instead of a list of dicts.
+
+    Returns:
+        One record per item, in input order: ``input``, ``name``, ``status`` (``ok`` or
+        ``failed``), ``error``, ``seconds``, ``metrics`` (a dict), ``resumed``, ``worker``.
+
+    Raises NurbskitError before any work starts for bad inputs or options; a failure
+    of one item is a record, never an exception. KeyboardInterrupt passes through after
+    the cluster is closed and the summary of the finished items is written.
+    """
+    command = get_command(command)
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    options = [str(o) for o in options]
+    _check_positive("workers", workers)
+    _check_positive("threads_per_worker", threads_per_worker)
+    _check_positive("retries", retries, allow_zero=True)
+    _check_positive("timeout", timeout, integer=False)
+    if resume and overwrite:
+        raise OptionError("--resume and --overwrite: choose one (resume keeps finished outputs, overwrite redoes them)")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OptionError(f"--out {out}: expected a directory, found an existing file")
+    items = find_items(inputs, command, exclude=out)
+    # Parse the options once here, so that a typo fails now and not once per item.
+    command_args(command, items[0], out / items[0].name, options)
+    if out.is_dir() and any(out.iterdir()) and not (resume or overwrite):
+        raise OptionError(f"--out {out}: directory exists and is not empty; pass --resume to continue it "
+                          f"or --overwrite to run every input again")
+    _distributed()  # a missing extra fails before any work, whatever there is to do
+    if client is None and scheduler is None:
+        _memory_bytes(memory_limit)  # a bad size fails now, before --out is created
+    if dataframe:
+        try:
+            import pandas
+        except ImportError:
+            raise OptionError("dataframe=True needs pandas (pip install pandas); "
+                              "without it the summary is a list of dicts and summary.csv") from None
+    notify = progress or (lambda event: None)
+
+    records: dict[str, dict] = {}
+    if resume:
+        for item in items:
+            record = completed(command, item, out, options)
+            if record is not None:
+                records[item.name] = record
+    todo = [item for item in items if item.name not in records]
+    meta = {"command": command.name, "options": options, "out": str(out), "timeout": timeout,
+            "retries": retries, "threads_per_worker": threads_per_worker, "submitted": len(todo),
+            "resumed": len(records)}
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    interrupted = False
+    try:
+        if todo:
+            with connect(client, scheduler, workers=workers, threads_per_worker=threads_per_worker,
+                         memory_limit=memory_limit, retries=retries) as (dask_client, info):
+                meta.update({k: v for k, v in info.items() if k != "scheduler"})
+                meta["dashboard"] = dashboard_link(dask_client, info["cluster"] == "local")
+                notify({"event": "started", "dashboard": meta["dashboard"], "scheduler": info["scheduler"],
+                        "total": len(items), "resumed": len(records), **{k: v for k, v in info.items() if k == "workers"}})
+                limit = f"--memory-limit {memory_limit}" if info["cluster"] == "local" else "its memory limit"
+                _follow(dask_client, command, todo, out, options, threads_per_worker, timeout, records,
+                        notify, len(items), limit, retries if info["cluster"] == "local" else None)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        meta["wall_seconds"] = time.perf_counter() - start
+        meta["interrupted"] = interrupted
+        ordered = []
+        for item in items:
+            ordered.append(records.get(item.name) or {
+                "input": item.source, "name": item.name, "status": "failed", "seconds": 0.0, "metrics": {},
+                "error": "interrupted before it finished" if interrupted else "not run"})
+        for r in ordered:
+            r.setdefault("resumed", False)
+        write_summary(out, ordered, meta, figure=figure and not interrupted)
+    if dataframe:
+        from .summary import flat_rows
+
+        return pandas.DataFrame(flat_rows(ordered))
+    return ordered
+
+
+def window_size(client) -> int:
+    """How many items may wait on the scheduler at once: 4 per worker thread, at least 32.
+
+    The rest wait in this process, as :class:`Item` objects of a few hundred bytes:
+    a scheduler holds about 3.7 kB per queued task (measured, ``benchmarks/bench_batch.py``),
+    so a window keeps its memory flat however many inputs there are (68 MB with 10,000
+    queued, as empty), and every worker still has its next item waiting on the scheduler
+    when it finishes one.
+    """
+    try:
+        threads = sum(client.nthreads().values())
+    except Exception:  # noqa: BLE001 - a window size, never a reason to fail
+        threads = 0
+    return max(32, 4 * threads)
+
+
+def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
+    """Submit one task per item (a window at a time) and collect the records as they finish."""
+    from collections import deque
+
+    distributed = _distributed()
+    token = uuid.uuid4().hex[:8]
+    queue = deque(enumerate(todo))
+    in_flight: dict[str, tuple] = {}
+    ac = distributed.as_completed([], with_results=False, loop=client.loop)
+    failed = sum(r["status"] != "ok" for r in records.values())
+    retries_hint = (f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None
+                    else "attempts as the scheduler's allowed-failures permits")
+    window = window_size(client)
+
+    def top_up():
+        batch = [queue.popleft() for _ in range(min(len(queue), window - len(in_flight)))]
+        if not batch:
+            return
+        keys = [f"nurbskit-{command.name}-{token}-{i}" for i, _ in batch]
+        items = [item for _, item in batch]
+        payloads = [packed_task(item, k, command=command, out_root=str(out), options=list(options), threads=threads,
+                                timeout=timeout) for item, k in zip(items, keys)]
+        futures = client.map(pickle.loads, payloads, key=keys, pure=False)
+        for future, item in zip(futures, items):
+            in_flight[future.key] = (future, item)
+            ac.add(future)
+
+    last_poll, running = 0.0, 0
+    try:
+        top_up()
+        while in_flight:
+            batch = ac.next_batch(block=False)
+            finished = [f for f in batch if f.status == "finished"]
+            results = client.gather(finished, errors="skip") if finished else []
+            got = {f.key: r for f, r in zip(finished, results)} if len(results) == len(finished) else {}
+            for future in batch:
+                _, item = in_flight.pop(future.key)
+                record = got.get(future.key)
+                if record is None:
+                    if future.status == "finished":
+                        record = client.gather(future, errors="raise")
+                    else:
+                        exc = future.exception() if future.status == "error" else None
+                        error = _failure_message(exc, client, memory_limit, retries_hint) if exc else f"task {future.status}"
+                        record = {"input": item.source, "name": item.name, "status": "failed", "error": error,
+                                  "seconds": 0.0, "metrics": {}}
+                record["resumed"] = False
+                records[item.name] = record
+                failed += record["status"] != "ok"
+                notify({"event": "result", "record": record})
+            if batch:
+                top_up()
+                notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
+                continue
+            now = time.monotonic()
+            if now - last_poll > 1.0:
+                last_poll = now
+                with contextlib.suppress(Exception):
+                    running = sum(1 for keys_ in client.processing().values() for k in keys_ if k in in_flight)
+                window = window_size(client)  # workers may have come or gone
+                top_up()
+                notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
+            time.sleep(0.05)
+    finally:
+        if in_flight:
+            with contextlib.suppress(Exception):
+                client.cancel([f for f, _ in in_flight.values()])
+
+
+__all__ = ["run", "connect", "completed", "dashboard_link", "usable_cores", "MARKER"]

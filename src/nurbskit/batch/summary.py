@@ -1,0 +1,113 @@
+"""``DIR/summary.csv``, ``summary.json`` and ``summary.png``: one row per input and an aggregate.
+
+Columns: ``input`` (what the user named), ``name`` (the output folder), ``status`` (``ok``
+or ``failed``), ``error`` (one line), ``seconds`` (the item's own wall time on its worker),
+``resumed`` (true when ``--resume`` found the item finished and did not run it), then the
+command's headline metrics. The aggregate row (``input`` = ``ALL``) counts ok and failed
+items, sums the seconds and gives the mean of each metric over the ok items. Every file
+is written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from pathlib import Path
+from typing import Sequence
+
+from .._fs import atomic_open
+
+BASE_COLUMNS = ("input", "name", "status", "error", "seconds", "resumed")
+
+
+def metric_names(records: Sequence[dict]) -> list[str]:
+    """Metric names in first-seen order across ``records``."""
+    names: list[str] = []
+    for record in records:
+        for key in record.get("metrics") or {}:
+            if key not in names:
+                names.append(key)
+    return names
+
+
+def flat_rows(records: Sequence[dict]) -> list[dict]:
+    """Records with their metrics as top-level columns (one dict per input)."""
+    names = metric_names(records)
+    rows = []
+    for r in records:
+        row = {k: r.get(k, "") for k in BASE_COLUMNS}
+        row["resumed"] = bool(r.get("resumed", False))
+        metrics = r.get("metrics") or {}
+        row.update({n: metrics.get(n, float("nan")) for n in names})
+        rows.append(row)
+    return rows
+
+
+def aggregate(records: Sequence[dict]) -> dict:
+    """The aggregate row: counts, total seconds, mean of each metric over ok items."""
+    ok = [r for r in records if r.get("status") == "ok"]
+    failed = len(records) - len(ok)
+    row = {"input": "ALL", "name": "", "status": f"{len(ok)} ok, {failed} failed", "error": "",
+           "seconds": float(sum(float(r.get("seconds") or 0.0) for r in records)),
+           "resumed": sum(bool(r.get("resumed")) for r in records)}
+    for name in metric_names(records):
+        values = [float(r["metrics"][name]) for r in ok if name in (r.get("metrics") or {})]
+        values = [v for v in values if math.isfinite(v)]
+        row[name] = sum(values) / len(values) if values else float("nan")
+    return row
+
+
+def _json_safe(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+def write_summary(out: str | os.PathLike, records: Sequence[dict], meta: dict, *, figure: bool = True) -> list[Path]:
+    """Write the summary files into ``out``; returns their paths."""
+    out = Path(out)
+    rows = flat_rows(records)
+    total = aggregate(records)
+    columns = [*BASE_COLUMNS, *metric_names(records)]
+    with atomic_open(out / "summary.csv", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
+        writer.writeheader()
+        for row in [*rows, total]:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+    with atomic_open(out / "summary.json", encoding="utf-8") as handle:
+        json.dump(_json_safe({**meta, "aggregate": total, "rows": rows}), handle, indent=1)
+        handle.write("\n")
+    paths = [out / "summary.csv", out / "summary.json"]
+    if figure:
+        paths.append(plot_summary(records, out / "summary.png", title=f"nurbskit batch {meta.get('command', '')}"))
+    return paths
+
+
+def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = "") -> Path:
+    """Histograms of each metric and of the seconds per item (ok items), one panel each."""
+    from ..viz.plots import _figure, _save
+
+    ok = [r for r in records if r.get("status") == "ok"]
+    names = [*metric_names(records), "seconds"]
+    fig = _figure((3.6 * len(names), 3.2))
+    axes = fig.subplots(1, len(names), squeeze=False)[0]
+    for ax, name in zip(axes, names):
+        values = [float(r["seconds"]) if name == "seconds" else float((r.get("metrics") or {}).get(name, math.nan))
+                  for r in ok]
+        values = [v for v in values if math.isfinite(v)]
+        if values:
+            ax.hist(values, bins=min(30, max(5, len(values) // 2)), color="tab:blue", edgecolor="white")
+        else:
+            ax.text(0.5, 0.5, "no values", ha="center", va="center", transform=ax.transAxes)
+        ax.set_xlabel(name)
+        ax.set_ylabel("inputs")
+    failed = len(records) - len(ok)
+    fig.suptitle(f"{title}: {len(ok)} ok, {failed} failed".strip(": "))
+    return _save(fig, path)
+

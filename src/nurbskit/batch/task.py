@@ -1,0 +1,283 @@
+"""One item, run on a worker: the single command in process, a deadline, a completion marker.
+
+:func:`run_item` is the task ``nurbskit batch`` submits once per item. It never raises
+for a failure of the item itself (a bad file, a non-finite fit, a timeout): it returns
+a record with ``status="failed"`` and a one-line ``error``, so one bad input cannot stop
+the others. Only the loss of the worker process (killed for memory, crashed) is seen
+by the scheduler, which retries the item on another worker (``--retries``).
+
+Convention (the output folder ``DIR/<name>/`` of one item):
+    The single command builds it under a temporary name and renames it into place when
+    complete (:func:`nurbskit._fs.output_directory`). The batch then writes the
+    completion marker ``DIR/<name>/.nurbskit-batch.json`` (atomically: temporary file,
+    then rename), last. ``--resume`` skips an item only when its marker is there, names
+    the same command and options, and the input files have not changed since; so an
+    item interrupted at any point, even between the rename and the marker, runs again,
+    and its folder is replaced as a whole.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import importlib
+import io
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import threading
+import time
+from functools import lru_cache
+from pathlib import Path
+
+from .._fs import atomic_open
+from ..errors import NurbskitError, OptionError
+from .commands import BatchCommand, Item
+
+MARKER = ".nurbskit-batch.json"
+MARKER_VERSION = 1
+# Options the batch sets itself for every item; the user may not pass them after `--`.
+RESERVED_OPTIONS = ("--out", "--overwrite")
+
+
+class TaskTimeout(BaseException):
+    """Raised inside a task that ran past ``--timeout``.
+
+    A BaseException, like KeyboardInterrupt, so that no ``except Exception`` in the
+    command swallows it and every ``finally`` (the temporary output folder's removal)
+    still runs.
+    """
+
+
+class _RaisingParser(argparse.ArgumentParser):
+    """The command's own parser, raising OptionError instead of exiting the worker."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        raise OptionError(f"{self.prog}: {message}")
+
+
+@lru_cache(maxsize=None)
+def command_parser(module: str, name: str) -> argparse.ArgumentParser:
+    """The parser ``nurbskit <name>`` uses, built by the command's own ``register``."""
+    root = _RaisingParser(prog="nurbskit")
+    subparsers = root.add_subparsers(parser_class=_RaisingParser)
+    importlib.import_module(module).register(subparsers)
+    return subparsers.choices[name]
+
+
+def command_args(command: BatchCommand, item: Item, out_dir: str | os.PathLike, options: list[str]) -> argparse.Namespace:
+    """The single command's parsed arguments for ``item``, writing to ``out_dir``.
+
+    ``options`` (what followed ``--``) are parsed by the command's own parser, after the
+    item's inputs; the batch adds ``--out``, ``--overwrite`` (a folder without a
+    completion marker is unfinished work) and ``--quiet`` where the command has it.
+    """
+    for option in options:
+        if option.split("=", 1)[0] in RESERVED_OPTIONS:
+            raise OptionError(f"-- {option}: set by nurbskit batch for each input (use batch's --out DIR)")
+    parser = command_parser(command.module, command.name)
+    extra = ["--out", os.fspath(out_dir), "--overwrite"]
+    if "--quiet" in parser._option_string_actions:
+        extra.append("--quiet")
+    return parser.parse_args([*command.argv(item), *extra, *options])
+
+
+def fingerprint(item: Item) -> list[dict]:
+    """What ``--resume`` compares: each input file's path, size and modification time."""
+    out = []
+    for role, path in item.inputs:
+        try:
+            st = os.stat(path)
+            out.append({"role": role, "path": os.path.abspath(path), "size": st.st_size, "mtime_ns": st.st_mtime_ns})
+        except OSError:
+            out.append({"role": role, "path": os.path.abspath(path), "size": None, "mtime_ns": None})
+    return out
+
+
+def read_marker(folder: str | os.PathLike) -> dict | None:
+    """The completion marker of an item's folder, or None (absent or unreadable)."""
+    try:
+        with open(Path(folder) / MARKER, encoding="utf-8") as handle:
+            marker = json.load(handle)
+    except (OSError, ValueError):
+        return None
+    return marker if isinstance(marker, dict) and marker.get("version") == MARKER_VERSION else None
+
+
+def one_line(text: str, limit: int = 400, last: bool = False) -> str:
+    """An error message as one line, at most ``limit`` characters: the first non-empty line
+    of several (an exception's summary), or the ``last`` (what a command printed last)."""
+    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
+    line = (lines[-1] if last else lines[0]) if lines else ""
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for a failed item, in the words the single command would print."""
+    if isinstance(exc, NurbskitError):
+        return one_line(str(exc))
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return one_line(f"{where}{exc.strerror or exc}")
+    if isinstance(exc, MemoryError):
+        return "out of memory; the input is too large for this worker"
+    return one_line(f"{type(exc).__name__}: {exc}")
+
+
+def _remove_stale(out_root: Path, name: str) -> None:
+    """Remove temporary folders an earlier, killed attempt at ``name`` left in ``out_root``.
+
+    They are :func:`nurbskit._fs.output_directory`'s ``.<name>.XXXXXXXX.tmp`` / ``.old``
+    (mkdtemp's 8-character suffix, so ``a`` never matches ``a.b``'s folders).
+    """
+    pattern = re.compile(r"^\." + re.escape(name) + r"\.[A-Za-z0-9_]{8}\.(tmp|old)$")
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(out_root):
+            if pattern.match(entry.name):
+                shutil.rmtree(entry.path, ignore_errors=True)
+
+
+def _raise_in_thread(thread_id: int, exc_type) -> None:
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id), ctypes.py_object(exc_type) if exc_type else None)
+
+
+@contextlib.contextmanager
+def deadline(seconds: float | None, key: str = ""):
+    """Raise :class:`TaskTimeout` in this thread once ``seconds`` have passed.
+
+    The exception is delivered between two Python bytecodes of the running thread
+    (``PyThreadState_SetAsyncExc``): the fitting loops return to Python at every
+    iteration, so it lands within one iteration. If the thread is still busy
+    ``max(10 s, seconds / 2)`` later (stuck inside one long native call), the worker
+    process ends itself, after logging a ``nurbskit-batch-timeout`` event that the
+    batch reads to report the timeout; the nanny starts a fresh worker.
+    """
+    if not seconds:
+        yield
+        return
+    thread_id = threading.get_ident()
+    lock = threading.Lock()
+    state = {"done": False, "fired": False}
+    stop = threading.Event()
+
+    def watchdog():
+        if stop.wait(seconds):
+            return
+        with lock:
+            if state["done"]:
+                return
+            state["fired"] = True
+            _raise_in_thread(thread_id, TaskTimeout)
+        if stop.wait(max(10.0, seconds / 2)):
+            return
+        with contextlib.suppress(Exception):
+            from distributed import get_worker
+
+            get_worker().log_event("nurbskit-batch-timeout", {"key": key, "seconds": seconds})
+            time.sleep(1.0)  # let the event reach the scheduler
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    guard = threading.Thread(target=watchdog, name="nurbskit-batch-deadline", daemon=True)
+    guard.start()
+    try:
+        yield
+    finally:
+        with lock:
+            state["done"] = True
+            if state["fired"]:
+                _raise_in_thread(thread_id, None)  # clear an exception not delivered yet
+        stop.set()
+
+
+@contextlib.contextmanager
+def _torch_threads(threads: int | None):
+    if not threads:
+        yield
+        return
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(int(threads))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root: str, options: list[str] = (),
+             threads: int | None = 1, timeout: float | None = None) -> dict:
+    """Run ``command`` on ``item`` into ``out_root/<item.name>/``; a summary record.
+
+    The record: ``name``, ``input`` (what the user named), ``status`` (``ok`` or
+    ``failed``), ``error`` (one line, empty when ok), ``seconds`` (this item's wall
+    time), ``metrics`` (the command's headline numbers), ``worker`` (host:pid).
+    ``task_key`` names the task in the timeout event (see :func:`deadline`).
+    """
+    out_root_path = Path(out_root)
+    out_dir = out_root_path / item.name
+    start = time.perf_counter()
+    record = {"name": item.name, "input": item.source, "status": "failed", "error": "", "seconds": 0.0,
+              "metrics": {}, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    try:
+        with deadline(timeout, task_key):
+            _remove_stale(out_root_path, item.name)
+            args = command_args(command, item, out_dir, options)
+            stdout, stderr = io.StringIO(), io.StringIO()
+            with _torch_threads(threads), contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+                code = int(args.run(args) or 0)
+            if code != 0:
+                raise _CommandFailed(one_line(stderr.getvalue(), last=True) or f"{command.name} exited with status {code}")
+            with open(out_dir / command.report, encoding="utf-8") as handle:
+                metrics = command.metrics(json.load(handle))
+        done = {**record, "status": "ok", "metrics": metrics, "seconds": time.perf_counter() - start}
+        marker = {"version": MARKER_VERSION, "command": command.name, "options": list(options),
+                  "inputs": fingerprint(item), "record": done}
+        with atomic_open(out_dir / MARKER, encoding="utf-8") as handle:
+            json.dump(marker, handle, indent=1)
+        record = done  # ok only once the marker is written
+    except TaskTimeout:
+        record["error"] = f"timed out after {timeout:g} s (--timeout)"
+    except _CommandFailed as exc:
+        record["error"] = str(exc)
+    except SystemExit as exc:  # a command that calls sys.exit must not end the worker
+        record["error"] = f"{command.name} exited with status {exc.code}"
+    except Exception as exc:  # noqa: BLE001 - any failure of one item is recorded, never raised
+        record["error"] = describe_error(exc)
+    record["seconds"] = time.perf_counter() - start
+    return record
+
+
+def _run_item_now(args: tuple, kwargs: dict) -> dict:
+    return run_item(*args, **kwargs)
+
+
+class _RunOnLoad:
+    """Pickles as "call :func:`run_item` with these arguments" (see :func:`packed_task`)."""
+
+    def __init__(self, args: tuple, kwargs: dict):
+        self.args, self.kwargs = args, kwargs
+
+    def __reduce__(self):
+        return _run_item_now, (self.args, self.kwargs)
+
+
+def packed_task(*args, **kwargs) -> bytes:
+    """``run_item(*args, **kwargs)`` as bytes that run it when unpickled.
+
+    The batch submits ``pickle.loads(packed_task(...))``: the scheduler, which unpickles
+    every task it receives, then sees only the standard library's ``pickle.loads`` and a
+    bytes argument, and so never imports nurbskit (nor torch: 240 MB of scheduler memory,
+    measured) and needs nothing but Dask installed; the worker's ``pickle.loads`` imports
+    nurbskit and runs the item.
+    """
+    import pickle
+
+    return pickle.dumps(_RunOnLoad(args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+
+
+class _CommandFailed(Exception):
+    """The command returned a non-zero status (its last stderr line is the message)."""
