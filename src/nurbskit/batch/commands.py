@@ -16,14 +16,8 @@ function (what ``nurbskit fit`` itself calls) with ``--out DIR/<item name>``: th
 outputs are those of the single command, written the same way (built under a temporary
 name by :func:`nurbskit._fs.output_directory`, renamed into place when complete).
 
-Adding a command is a few lines. For example, once ``nurbskit patches`` exists::
-
-    register(BatchCommand(
-        name="patches", module="nurbskit.cli.patches_command",
-        extensions=FIT_EXTENSIONS,
-        metrics=_pick({"patches": "patches", "completeness": "completeness",
-                       "p_cov_in": "p_cov_in", "p_cov_out": "p_cov_out"}),
-    ))
+Adding a command is a few lines: a metrics function and one ``register(BatchCommand(...))``
+call (see ``patches`` at the end of this module).
 
 Entries hold only module-level functions, so that they pickle by reference and every
 worker resolves them from its own installed ``nurbskit``.
@@ -107,6 +101,13 @@ def volume_metrics(report: dict) -> dict:
     return out
 
 
+def patches_metrics(report: dict) -> dict:
+    """``nurbskit patches``'s headline: |N|, completeness, P_cov^i and P_cov^o (percent)."""
+    m = report.get("metrics", {})
+    return {"patches": _number(m.get("N")), "completeness": _number(m.get("completeness")),
+            "p_cov_in": _number(m.get("P_cov_i")), "p_cov_out": _number(m.get("P_cov_o"))}
+
+
 VIEWS = ("front", "left", "top")
 
 
@@ -181,4 +182,7 @@ register(BatchCommand(
     expand=volume_rows, argv=volume_argv,
     description="fit a NURBS volume to each front/left/top row of CSV files",
 ))
-
+register(BatchCommand(
+    name="patches", module="nurbskit.cli.patches_command", extensions=FIT_EXTENSIONS, metrics=patches_metrics,
+    description="fit a few trimmed NURBS patches to each scan",
+))
