@@ -61,19 +61,30 @@ def axis_angle_degrees(a, b) -> float:
     return math.degrees(math.acos(min(1.0, c)))
 
 
-def extrusion_direction(normals) -> tuple[Tensor, float]:
+def extrusion_direction(normals, *, iterations: int = 10) -> tuple[Tensor, float]:
     """The direction most orthogonal to all ``normals (N, 3)`` and its spread.
 
-    Returns ``(d (3,), spread)``: ``spread = lambda_min / lambda_mid`` of the scatter.
+    Weighted scatter with ``iterations`` IRLS rounds (Tukey weights on ``n_i . d``: normals
+    estimated across sharp edges are outliers). Returns ``(d (3,), spread)``:
+    ``spread = lambda_min / lambda_mid`` of the (unweighted) scatter.
     """
     n = _f64(normals, "normals")
     n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-300)
     vals, vecs = torch.linalg.eigh(n.T @ n)
-    return vecs[:, 0], float(vals[0] / vals[1].clamp_min(1e-300))
+    spread = float(vals[0] / vals[1].clamp_min(1e-300))
+    d = vecs[:, 0]
+    for _ in range(max(0, iterations - 1)):
+        w = _tukey(n @ d)
+        if float(w.sum()) < 12:
+            break
+        d = torch.linalg.eigh((n * w[:, None]).T @ n)[1][:, 0]
+    return d, spread
 
 
-def _tukey(residual: Tensor, c: float = 4.685) -> Tensor:
-    scale = 1.4826 * residual.abs().median().clamp_min(1e-12)
+def _tukey(residual: Tensor, c: float = 4.685, floor: float = 1e-3) -> Tensor:
+    """Tukey biweights; the MAD scale has a ``floor`` (residuals here are sines and unit-scaled
+    distances), so clean data, whose residuals are all ~0, keeps its weights."""
+    scale = (1.4826 * residual.abs().median()).clamp_min(floor)
     x = residual.abs() / (c * scale)
     return torch.where(x < 1, (1 - x * x) ** 2, torch.zeros_like(x))
 

@@ -128,8 +128,16 @@ def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
     return float(d.mean()), float(np.percentile(d, 95))
 
 
+REFINE_POINTS = 800
+"""The refinement runs on at most this many points (a fixed-seed subset): the unknowns
+number a few dozen, and the projection's cost grows with the points."""
+
+
 def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
     """Minimise the mean squared distance of ``points`` to ``build()`` over ``params``."""
+    if points.shape[0] > REFINE_POINTS:
+        g = torch.Generator().manual_seed(0)
+        points = points[torch.randperm(points.shape[0], generator=g)[:REFINE_POINTS]]
     state = {"uv": None, "evals": 0}
     opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, history_size=10,
                             line_search_fn="strong_wolfe", tolerance_grad=1e-12, tolerance_change=1e-15)
@@ -175,7 +183,7 @@ def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle):
     return revolve(prof, o, a, angle), e1
 
 
-def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 40, k: int = 16) -> ShapeFit:
+def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
     """Fit an exact surface of revolution to ``points (N, 3)`` (module docstring).
 
     ``normals (N, 3)`` are estimated when None; ``iterations``: L-BFGS iterations of the
@@ -242,7 +250,7 @@ def _extrusion_surface(c, d, e1, xy, weights, knots, degree, t0, t1):
     return extrude(prof, d, t1 - t0), e1, e2
 
 
-def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 40, k: int = 16) -> ShapeFit:
+def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
     """Fit an exact extrusion (a general cylinder) to ``points (N, 3)`` (module docstring)."""
     t_start = time.perf_counter()
     p = _cloud(points)
@@ -300,7 +308,7 @@ def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> Shape
                     reason=reason, candidates=candidates)
 
 
-def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, iterations: int = 40,
+def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, iterations: int = 30,
               auto_tolerance: float = 5e-3, freeform: bool = True) -> ShapeFit:
     """Fit a surface of revolution, an extrusion, or (``auto``) the better of the two.
 
