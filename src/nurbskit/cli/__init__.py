@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.io_commands",
     "nurbskit.cli.fit_command",
     "nurbskit.cli.volume_command",
+    "nurbskit.cli.shape_command",
 )
 
 EXIT_USER_ERROR = 2
