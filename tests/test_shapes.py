@@ -74,6 +74,7 @@ def test_extrusion_direction_clean(kind):
     # and the short legs); at 0.5 % noise it is within 0.2 (benchmarks/bench_shapes.py)
     pytest.param("extrusion", 0, marks=pytest.mark.xfail(strict=True, reason="L at 1 % noise: ~1 degree")),
 ])
+@pytest.mark.slow
 def test_axis_after_refinement_with_one_percent_noise(kind, seed):
     c = vase_cloud(2000, 0.01, seed) if kind == "revolution" else extrusion_cloud(2000, 0.01, seed, "L")
     fit = fit_shape(c.points, kind)
@@ -122,6 +123,7 @@ def test_partial_revolution_angle():
     assert fit.distance_mean < 1e-3
 
 
+@pytest.mark.slow
 def test_auto_chooses_by_residual():
     fit = fit_shape(vase_cloud(1200, 0.0, 8).points, "auto", iterations=10)
     assert fit.kind == "revolution", fit.reason
