@@ -278,3 +278,11 @@ def test_bad_arguments_raise():
 
 def test_exported_from_package():
     assert nurbskit.revolve is revolve and nurbskit.extrude is extrude
+
+
+def test_docstring_examples():
+    import doctest
+
+    from nurbskit.core import construct
+
+    assert doctest.testmod(construct, raise_on_error=False).failed == 0

@@ -148,3 +148,12 @@ def test_bad_kind_and_too_few_points():
         fit_shape(torch.rand(100, 3), "cone")
     with pytest.raises(InputError, match="at least 30"):
         fit_shape(torch.rand(10, 3), "revolution")
+
+
+def test_docstring_examples():
+    import doctest
+
+    from nurbskit.shapes import axis, fit, normals
+
+    for module in (axis, normals, fit):
+        assert doctest.testmod(module, raise_on_error=False).failed == 0, module.__name__

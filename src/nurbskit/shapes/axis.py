@@ -97,12 +97,12 @@ def revolution_axis(points, normals, *, iterations: int = 10) -> Axis:
 
     Example:
         >>> import torch, math
-        >>> t = torch.rand(300, 2, dtype=torch.float64) * 2 * math.pi
+        >>> t = torch.rand(300, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 2 * math.pi
         >>> p = torch.stack([(2 + torch.cos(t[:, 1])) * torch.cos(t[:, 0]),
         ...                  (2 + torch.cos(t[:, 1])) * torch.sin(t[:, 0]), torch.sin(t[:, 1])], -1)
         >>> n = p - 2 * torch.stack([torch.cos(t[:, 0]), torch.sin(t[:, 0]), 0 * t[:, 0]], -1)
         >>> ax = revolution_axis(p, n)  # a torus about z
-        >>> round(abs(float(ax.direction[2])), 9), round(float(ax.point.norm()), 9)
+        >>> round(abs(float(ax.direction[2])), 9), round(float(ax.point[:2].norm()), 9)
         (1.0, 0.0)
     """
     p = _f64(points, "points")

@@ -26,7 +26,7 @@ def estimate_normals(points, k: int = 16) -> Tensor:
 
     Example:
         >>> import torch
-        >>> g = torch.rand(200, 2, dtype=torch.float64)
+        >>> g = torch.rand(200, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
         >>> n = estimate_normals(torch.cat([g, torch.zeros(200, 1, dtype=torch.float64)], 1))
         >>> bool((n[:, 2].abs() > 1 - 1e-9).all())
         True
