@@ -157,3 +157,16 @@ def test_docstring_examples():
 
     for module in (axis, normals, fit):
         assert doctest.testmod(module, raise_on_error=False).failed == 0, module.__name__
+
+
+def test_real_cylinder_mesh(shared_data):
+    """classic_meshes/cylinder.obj (a capped cylinder along y, radius 1): auto finds the revolution."""
+    from nurbskit.geometry.sampling import sample_mesh
+    from nurbskit.io import read_mesh
+
+    mesh = read_mesh(shared_data / "classic_meshes" / "cylinder.obj")
+    pts = torch.as_tensor(sample_mesh(mesh.vertices, mesh.faces, 2000, "uniform", seed=0), dtype=F64)
+    fit = fit_shape(pts, "auto", iterations=10, freeform=False)
+    assert fit.kind == "revolution", fit.reason
+    assert axis_angle_degrees(fit.axis["direction"], [0.0, 1.0, 0.0]) < 0.5
+    assert fit.distance_mean < 2e-3  # the caps' sharp rims are rounded by the cubic profile
