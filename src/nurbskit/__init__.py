@@ -34,6 +34,8 @@ _LAZY = {
     "decompose_bezier": ("nurbskit.core.ops", "decompose_bezier"),
     "sample_mesh": ("nurbskit.geometry.sampling", "sample_mesh"),
     "fit_surface": ("nurbskit.fit", "fit_surface"),
+    "revolve": ("nurbskit.core.construct", "revolve"),
+    "extrude": ("nurbskit.core.construct", "extrude"),
     "fit_silhouettes": ("nurbskit.volume", "fit_silhouettes"),
     "fit_patches": ("nurbskit.patches", "fit_patches"),
     "io": ("nurbskit.io", None),

@@ -30,6 +30,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.export_command",
     "nurbskit.cli.patches_command",
     "nurbskit.cli.batch_command",
+    "nurbskit.cli.shape_command",
 )
 
 EXIT_BUG = 1

@@ -1,0 +1,117 @@
+"""Surfaces of revolution and extrusions from clouds: the geometric path of issue 11.
+
+Question: on a held-out synthetic set, how close are the recovered axis / direction and
+the surface, and how long does one cloud take?
+
+Method: ``--count`` clouds per kind (fixed seeds 10_000 + i, disjoint from the tests'
+seeds 0-12), 2,000 points each, Gaussian noise of ``--noise`` (default 0.5 %) of the
+bounding-box diagonal per coordinate. Revolution: random vases
+(:func:`nurbskit.shapes.synthetic.vase_cloud`, random axis). Extrusion: alternately a
+smooth cubic wave and an L profile, random direction. Each cloud is fitted with its kind
+given (``fit_shape(points, kind)``, defaults: normals by PCA, 30 L-BFGS iterations on
+800 points). Per cloud: the axis angle error of the geometric estimate and after
+refinement (degrees), input-to-surface mean and p95 over the diagonal (the metrics
+module's projection), the **noise floor** (the same mean for the true surface: no fit
+can go below it), truth-to-fit mean (samples of the true surface to the fitted one: the
+error of the surface itself), seconds (wall clock, one cloud after a warm-up cloud),
+and the refinement's projection count. Reported: medians (and the 95th percentile of
+the axis error).
+
+Run: ``PYTHONPATH=src python benchmarks/bench_shapes.py [--count 50] [--noise 0.005]``.
+The issue asks for 500 clouds per kind; the committed run used fewer (see the results'
+``count``), because the machine is shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import write_results  # noqa: E402
+
+from nurbskit.metrics import surface_distances  # noqa: E402
+from nurbskit.shapes import axis_angle_degrees, fit_shape  # noqa: E402
+from nurbskit.shapes.synthetic import extrusion_cloud, vase_cloud  # noqa: E402
+
+
+def one(kind: str, seed: int, noise: float, n: int) -> dict:
+    if kind == "revolution":
+        c = vase_cloud(n, noise, seed)
+    else:
+        c = extrusion_cloud(n, noise, seed, "L" if seed % 2 else "smooth")
+    geo = fit_shape(c.points, kind, refine=False)
+    t = time.perf_counter()
+    fit = fit_shape(c.points, kind)
+    seconds = time.perf_counter() - t
+    floor = surface_distances(c.surface, c.points)["to_surface_mean"]
+    truth = c.surface.sample((40, 40)).reshape(-1, 3)
+    truth_to_fit = surface_distances(fit.surface, truth)["to_surface_mean"]
+    return {
+        "kind": kind,
+        "seed": seed,
+        "axis_deg_geometric": axis_angle_degrees(geo.axis["direction"], c.axis_direction),
+        "axis_deg": axis_angle_degrees(fit.axis["direction"], c.axis_direction),
+        "mean_geometric": geo.distance_mean,
+        "mean": fit.distance_mean,
+        "p95": fit.distance_p95,
+        "noise_floor": floor,
+        "truth_to_fit": truth_to_fit,
+        "seconds": seconds,
+        "projections": fit.iterations,
+    }
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--count", type=int, default=50)
+    ap.add_argument("--noise", type=float, default=0.005)
+    ap.add_argument("--points", type=int, default=2000)
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    one("revolution", 9999, args.noise, args.points)  # warm-up (imports, first projection)
+    raw = []
+    for kind in ("revolution", "extrusion"):
+        for i in range(args.count):
+            raw.append(one(kind, 10_000 + i, args.noise, args.points))
+            print(kind, i, {k: round(v, 5) for k, v in raw[-1].items() if isinstance(v, float)}, flush=True)
+    rows = []
+    for kind in ("revolution", "extrusion"):
+        r = [x for x in raw if x["kind"] == kind]
+        med = {k: statistics.median(x[k] for x in r) for k in r[0] if isinstance(r[0][k], (int, float)) and k != "seed"}
+        rows.append({
+            "kind": kind, "count": len(r),
+            "axis_deg_median": med["axis_deg"],
+            "axis_deg_p95": float(np.percentile([x["axis_deg"] for x in r], 95)),
+            "axis_deg_geometric_median": med["axis_deg_geometric"],
+            "mean_median": med["mean"], "p95_median": med["p95"],
+            "noise_floor_median": med["noise_floor"],
+            "mean_over_floor_median": statistics.median(x["mean"] / x["noise_floor"] for x in r),
+            "truth_to_fit_median": med["truth_to_fit"],
+            "seconds_median": med["seconds"], "projections_median": med["projections"],
+        })
+    cols = [("kind", "kind"), ("count", "clouds"), ("axis_deg_median", "axis err median (deg)"),
+            ("axis_deg_p95", "axis err p95"), ("axis_deg_geometric_median", "geometric axis err median"),
+            ("mean_median", "in-to-surface mean / diag"), ("p95_median", "p95 / diag"),
+            ("noise_floor_median", "noise floor mean / diag"), ("mean_over_floor_median", "mean / floor"),
+            ("truth_to_fit_median", "truth-to-fit mean / diag"), ("seconds_median", "s / cloud"),
+            ("projections_median", "projections")]
+    notes = (f"{args.count} clouds per kind (the issue asks for 500), {args.points} points, noise "
+             f"{args.noise:.3%} of the diagonal per coordinate, {args.threads} threads on a shared, "
+             "contended 2-core machine (seconds are inflated; projections is the load-free count). "
+             "The input-to-surface mean cannot go below the noise floor (the true surface's own mean).")
+    write_results("shapes", rows, cols, meta={"count": args.count, "noise": args.noise, "points": args.points,
+                                              "per_cloud": raw},
+                  title="Shapes: revolution and extrusion, geometric path", notes=notes)
+
+
+if __name__ == "__main__":
+    main()

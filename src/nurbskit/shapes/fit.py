@@ -1,0 +1,368 @@
+"""Surfaces of revolution and extrusions fitted to point clouds, exactly.
+
+Pipeline (``fit_shape``):
+
+1. normals, estimated by local PCA when the cloud has none (:mod:`.normals`);
+2. the axis (:func:`.axis.revolution_axis`, line geometry) or the direction
+   (:func:`.axis.extrusion_direction`);
+3. the profile: (distance to the axis, height) pairs for a revolution, the projection
+   onto the plane orthogonal to the direction for an extrusion, ordered and fitted as a
+   B-spline (:mod:`.profile`); the sweep's extent from the data (the angular gap of a
+   partial revolution, the height range of an extrusion);
+4. the exact NURBS (:func:`nurbskit.core.construct.revolve` / ``extrude``);
+5. refinement: profile control points, weights, and the axis (or direction and extent)
+   minimise the mean squared point-to-surface distance, the distances coming from the
+   core's projection (:func:`nurbskit.core.project.project_points`, warm-started, with
+   gradients by the envelope theorem), by L-BFGS (strong Wolfe line search).
+
+``kind="auto"`` fits both and keeps the one with the smaller mean distance; when neither
+is within ``auto_tolerance`` of the bounding-box diagonal it fits a free-form surface
+(:func:`nurbskit.fit_surface`). ``ShapeFit.reason`` says which and why.
+
+Convention: work is done in float64 on the CPU; ``points (N, 3)``; distances in reports
+are divided by the bounding-box diagonal of the points.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from ..core.construct import extrude, revolve
+from ..core.curve import NURBSCurve
+from ..core.project import project_points
+from ..core.surface import NURBSSurface
+from ..errors import InputError, OptionError
+from .axis import extrusion_direction, revolution_axis
+from .normals import estimate_normals
+from .profile import fit_profile
+
+Tensor = torch.Tensor
+F64 = torch.float64
+
+__all__ = ["ShapeFit", "fit_shape", "fit_revolution", "fit_extrusion", "KINDS", "PLANE_THICKNESS"]
+
+KINDS = ("revolution", "extrusion", "auto")
+PLANE_THICKNESS = 1e-3
+"""A cloud thinner than this fraction of its extent is a plane: it has no axis."""
+
+
+@dataclass
+class ShapeFit:
+    """A fitted shape.
+
+    ``kind``: 'revolution', 'extrusion' or 'freeform'; ``surface``: the exact NURBS;
+    ``axis``: ``{"point", "direction"}`` (the extrusion direction for extrusions, None for
+    free-form); ``profile``: the profile curve in its plane, ``(n, 2)`` control points
+    ((radius, height) about the axis, or the two in-plane coordinates of an extrusion);
+    ``profile_frame``: origin and the two 3-D unit vectors of that plane; ``angle``
+    (revolution) or ``extent`` (extrusion); ``distance_mean`` / ``distance_p95``: point to
+    surface over the diagonal; ``seconds``; ``reason``; ``candidates``: the other kinds'
+    mean distances (auto).
+    """
+
+    kind: str
+    surface: NURBSSurface
+    axis: dict | None
+    profile: NURBSCurve | None
+    profile_frame: dict | None
+    distance_mean: float
+    distance_p95: float
+    diagonal: float
+    seconds: float = 0.0
+    reason: str = ""
+    angle: float | None = None
+    extent: tuple[float, float] | None = None
+    iterations: int = 0
+    candidates: dict = field(default_factory=dict)
+    profile_points: np.ndarray | None = None
+
+
+def _cloud(points) -> Tensor:
+    p = torch.as_tensor(np.asarray(points) if not isinstance(points, Tensor) else points).detach().to(F64).cpu()
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"points must have shape (N, 3), got {tuple(p.shape)}")
+    if p.shape[0] < 30:
+        raise InputError(f"need at least 30 points to fit a shape, got {p.shape[0]}")
+    if not torch.isfinite(p).all():
+        raise InputError("points contain NaN or infinite values")
+    return p
+
+
+def planarity(points: Tensor) -> float:
+    """Thickness of the cloud: smallest over largest principal standard deviation."""
+    s = torch.linalg.svdvals(points - points.mean(0))
+    return float(s[-1] / s[0].clamp_min(1e-300))
+
+
+def _check_not_plane(points: Tensor, kind: str) -> None:
+    t = planarity(points)
+    if t < PLANE_THICKNESS:
+        raise InputError(
+            f"the points lie on a single plane (thickness {t:.1e} of their extent): "
+            f"a plane has no {'axis of revolution' if kind == 'revolution' else 'extrusion direction'}"
+        )
+
+
+def _perpendicular(a: Tensor, reference: Tensor | None = None) -> Tensor:
+    """A unit vector orthogonal to unit ``a``; the projection of ``reference`` when given."""
+    if reference is None:
+        reference = torch.tensor([1.0, 0.0, 0.0], dtype=a.dtype)
+        if abs(float(a.detach()[0])) > 0.9:
+            reference = torch.tensor([0.0, 1.0, 0.0], dtype=a.dtype)
+    e = reference - (reference @ a) * a
+    return e / e.norm()
+
+
+def _distances(surface, points, params=None):
+    proj = project_points(surface, points, params=params, restart=params is None, grid=48)
+    return proj
+
+
+def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
+    d = distance.detach().numpy() / diag
+    return float(d.mean()), float(np.percentile(d, 95))
+
+
+REFINE_POINTS = 800
+"""The refinement runs on at most this many points (a fixed-seed subset): the unknowns
+number a few dozen, and the projection's cost grows with the points."""
+
+
+def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
+    """Minimise the mean squared distance of ``points`` to ``build()`` over ``params``."""
+    if points.shape[0] > REFINE_POINTS:
+        g = torch.Generator().manual_seed(0)
+        points = points[torch.randperm(points.shape[0], generator=g)[:REFINE_POINTS]]
+    state = {"uv": None, "evals": 0}
+    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, history_size=10,
+                            line_search_fn="strong_wolfe", tolerance_grad=1e-12, tolerance_change=1e-15)
+    scale = float((points.amax(0) - points.amin(0)).norm()) ** 2
+
+    def closure():
+        opt.zero_grad()
+        surface = build()
+        proj = project_points(surface, points, params=state["uv"], grid=48, iterations=16,
+                              restart=state["uv"] is None, check_every=4)
+        state["uv"] = proj.params
+        state["evals"] += 1
+        loss = (proj.distance ** 2).mean() / scale
+        loss.backward()
+        return loss
+
+    try:
+        opt.step(closure)
+    except torch.linalg.LinAlgError:  # a degenerate trial surface: keep the last good state
+        pass
+    return state["evals"]
+
+
+# ---------------------------------------------------------------------------------------
+# revolution
+# ---------------------------------------------------------------------------------------
+def _angular_extent(phi: np.ndarray, min_gap: float = math.radians(20)) -> tuple[float, float]:
+    """(start, angle) of the arc the angles cover; a full turn unless a gap > min_gap."""
+    s = np.sort(np.mod(phi, 2 * math.pi))
+    gaps = np.diff(np.concatenate([s, [s[0] + 2 * math.pi]]))
+    i = int(np.argmax(gaps))
+    if gaps[i] <= min_gap:
+        return 0.0, 2 * math.pi
+    start = float(s[(i + 1) % s.size])
+    return start, float(2 * math.pi - gaps[i])
+
+
+def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle):
+    a = a / a.norm()
+    e1 = _perpendicular(a, e1)
+    prof = NURBSCurve(o + rz[:, :1] * e1 + rz[:, 1:2] * a, degree=degree, knot_vector=knots, weights=weights,
+                      validate=False)
+    return revolve(prof, o, a, angle), e1
+
+
+def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
+    """Fit an exact surface of revolution to ``points (N, 3)`` (module docstring).
+
+    ``normals (N, 3)`` are estimated when None; ``iterations``: L-BFGS iterations of the
+    refinement (0 or ``refine=False``: the geometric estimate alone).
+    """
+    t0 = time.perf_counter()
+    p = _cloud(points)
+    _check_not_plane(p, "revolution")
+    n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
+    ax = revolution_axis(p, n)
+    a = ax.direction
+    o = ax.point
+    rel = p - o
+    z = rel @ a
+    radial = rel - z[:, None] * a
+    r = radial.norm(dim=-1)
+    e1 = _perpendicular(a)
+    e2 = torch.linalg.cross(a, e1, dim=-1)
+    phi = torch.atan2(radial @ e2, radial @ e1).numpy()
+    start, angle = _angular_extent(phi)
+    e1 = math.cos(start) * e1 + math.sin(start) * e2
+    rz = torch.stack([r, z], -1)
+    prof = fit_profile(rz.numpy())
+    ctrl = prof.curve.control_points
+    knots, degree = prof.curve.knot_vector, prof.curve.degree
+    diag = float((p.amax(0) - p.amin(0)).norm())
+
+    o_t = o.detach().contiguous().clone().requires_grad_(refine)
+    a_t = a.detach().contiguous().clone().requires_grad_(refine)
+    rz_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
+    logw = torch.zeros(ctrl.shape[0], dtype=F64, requires_grad=refine)
+
+    def build():
+        s, _ = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        return s
+
+    evals = _lbfgs([o_t, a_t, rz_t, logw], build, p, iterations) if refine and iterations > 0 else 0
+    with torch.no_grad():
+        a_f = a_t / a_t.norm()
+        surface, e1_f = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        surface = surface.detach()
+        dist = _distances(surface, p).distance
+    mean, p95 = _summary(dist, diag)
+    # axis point: the foot of the points' centroid, so the report is independent of the start
+    o_f = o_t.detach() + ((p.mean(0) - o_t.detach()) @ a_f) * a_f
+    profile = NURBSCurve(rz_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    profile_frame = {"origin": o_t.detach().tolist(), "radial": e1_f.detach().tolist(), "axial": a_f.tolist()}
+    return ShapeFit(
+        "revolution", surface, {"point": o_f.tolist(), "direction": a_f.tolist()}, profile, profile_frame,
+        mean, p95, diag, time.perf_counter() - t0, angle=angle, iterations=evals,
+        profile_points=rz.numpy(),
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# extrusion
+# ---------------------------------------------------------------------------------------
+def _extrusion_surface(c, d, e1, xy, weights, knots, degree, t0, t1):
+    d = d / d.norm()
+    e1 = _perpendicular(d, e1)
+    e2 = torch.linalg.cross(d, e1, dim=-1)
+    prof = NURBSCurve(c + xy[:, :1] * e1 + xy[:, 1:2] * e2 + t0 * d, degree=degree, knot_vector=knots,
+                      weights=weights, validate=False)
+    return extrude(prof, d, t1 - t0), e1, e2
+
+
+def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
+    """Fit an exact extrusion (a general cylinder) to ``points (N, 3)`` (module docstring)."""
+    t_start = time.perf_counter()
+    p = _cloud(points)
+    _check_not_plane(p, "extrusion")
+    n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
+    d, _ = extrusion_direction(n)
+    c = p.mean(0)
+    e1 = _perpendicular(d)
+    e2 = torch.linalg.cross(d, e1, dim=-1)
+    rel = p - c
+    xy = torch.stack([rel @ e1, rel @ e2], -1)
+    t = rel @ d
+    prof = fit_profile(xy.numpy())
+    ctrl = prof.curve.control_points
+    knots, degree = prof.curve.knot_vector, prof.curve.degree
+    diag = float((p.amax(0) - p.amin(0)).norm())
+
+    d_t = d.detach().contiguous().clone().requires_grad_(refine)
+    xy_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
+    logw = torch.zeros(ctrl.shape[0], dtype=F64, requires_grad=refine)
+    t0 = t.min().detach().clone().requires_grad_(refine)
+    t1 = t.max().detach().clone().requires_grad_(refine)
+
+    def build():
+        s, _, _ = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        return s
+
+    evals = _lbfgs([d_t, xy_t, logw, t0, t1], build, p, iterations) if refine and iterations > 0 else 0
+    with torch.no_grad():
+        d_f = d_t / d_t.norm()
+        surface, e1_f, e2_f = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        surface = surface.detach()
+        dist = _distances(surface, p).distance
+    mean, p95 = _summary(dist, diag)
+    profile = NURBSCurve(xy_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    frame = {"origin": c.tolist(), "x": e1_f.tolist(), "y": e2_f.tolist()}
+    return ShapeFit(
+        "extrusion", surface, {"point": c.tolist(), "direction": d_f.tolist()}, profile, frame,
+        mean, p95, diag, time.perf_counter() - t_start, extent=(float(t0.detach()), float(t1.detach())), iterations=evals,
+        profile_points=xy.numpy(),
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# choice
+# ---------------------------------------------------------------------------------------
+def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> ShapeFit:
+    from ..fit import fit_surface
+
+    result = fit_surface(p, "default")
+    surface = result.surface.detach().to(F64)
+    diag = float((p.amax(0) - p.amin(0)).norm())
+    mean, p95 = _summary(_distances(surface, p).distance, diag)
+    return ShapeFit("freeform", surface, None, None, None, mean, p95, diag, time.perf_counter() - t_start,
+                    reason=reason, candidates=candidates)
+
+
+def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, iterations: int = 30,
+              auto_tolerance: float = 5e-3, freeform: bool = True) -> ShapeFit:
+    """Fit a surface of revolution, an extrusion, or (``auto``) the better of the two.
+
+    Args:
+        points: ``(N, 3)``.
+        kind: 'revolution', 'extrusion' or 'auto'.
+        normals: ``(N, 3)`` or None (estimated).
+        refine, iterations: the refinement (see :func:`fit_revolution`).
+        auto_tolerance: ``auto`` accepts an exact shape whose mean point-to-surface distance
+            is at most this fraction of the diagonal; otherwise free-form.
+        freeform: ``auto`` may fall back to :func:`nurbskit.fit_surface` (else it keeps the
+            better exact shape and says it is poor).
+
+    Example:
+        >>> from nurbskit.shapes.synthetic import vase_cloud
+        >>> fit = fit_shape(vase_cloud(600, seed=1).points, "revolution", iterations=10)
+        >>> fit.kind, fit.distance_mean < 1e-3
+        ('revolution', True)
+    """
+    if kind not in KINDS:
+        raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    opts = dict(refine=refine, iterations=iterations)
+    if kind == "revolution":
+        fit = fit_revolution(points, normals, **opts)
+        fit.reason = "asked for a surface of revolution"
+        return fit
+    if kind == "extrusion":
+        fit = fit_extrusion(points, normals, **opts)
+        fit.reason = "asked for an extrusion"
+        return fit
+    t_start = time.perf_counter()
+    p = _cloud(points)
+    if planarity(p) < PLANE_THICKNESS:
+        reason = f"the points lie on a plane (thickness {planarity(p):.1e}): no axis or direction; free-form"
+        if not freeform:
+            raise InputError(reason.rsplit(";", 1)[0])
+        return _freeform(p, reason, t_start, {})
+    fits = {}
+    for name, fn in (("revolution", fit_revolution), ("extrusion", fit_extrusion)):
+        try:
+            fits[name] = fn(p, normals, **opts)
+        except InputError:
+            continue
+    candidates = {name: f.distance_mean for name, f in fits.items()}
+    if not fits:
+        return _freeform(p, "neither a revolution nor an extrusion could be fitted; free-form", t_start, candidates)
+    # ties (a circular cylinder is both) go to the revolution: its circle is exact either way
+    best = min(fits.values(), key=lambda f: (f.distance_mean * (1.0 if f.kind == "revolution" else 1.05)))
+    others = ", ".join(f"{k} {v:.2e}" for k, v in candidates.items())
+    if best.distance_mean <= auto_tolerance or not freeform:
+        best.reason = (f"{best.kind}: smallest mean point-to-surface distance over the diagonal ({others}); "
+                       f"tolerance {auto_tolerance:.1e}")
+        best.candidates = candidates
+        best.seconds = time.perf_counter() - t_start
+        return best
+    return _freeform(p, f"no exact shape within {auto_tolerance:.1e} of the diagonal ({others}); free-form",
+                     t_start, candidates)

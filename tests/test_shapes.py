@@ -1,0 +1,172 @@
+"""Shape fitting: axis and direction estimators, round trips, auto choice, bad input.
+
+Oracles: synthetic clouds sampled from exact surfaces built by the core constructors,
+with known axis / direction (:mod:`nurbskit.shapes.synthetic`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from nurbskit.errors import InputError, OptionError
+from nurbskit.metrics import surface_distances
+from nurbskit.shapes import (
+    axis_angle_degrees, estimate_normals, extrusion_direction, fit_shape, order_points, revolution_axis,
+)
+from nurbskit.shapes.synthetic import extrusion_cloud, vase_cloud
+
+F64 = torch.float64
+
+
+def test_normals_of_a_sphere_are_radial():
+    g = torch.Generator().manual_seed(0)
+    p = torch.randn(1500, 3, generator=g, dtype=F64)
+    p = p / p.norm(dim=-1, keepdim=True)
+    n = estimate_normals(p, 12)
+    cos = (n * p).sum(-1).abs()
+    assert float(cos.mean()) > 0.999 and float(cos.min()) > 0.99
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_revolution_axis_clean(seed):
+    c = vase_cloud(2000, 0.0, seed)
+    ax = revolution_axis(c.points, estimate_normals(c.points, 24))
+    assert axis_angle_degrees(ax.direction, c.axis_direction) < 0.5
+    # the axis point lies on the true axis (distance over the diagonal)
+    rel = ax.point - c.axis_point
+    off = (rel - (rel @ c.axis_direction) * c.axis_direction).norm()
+    assert float(off) < 5e-3
+
+
+def test_revolution_axis_exact_normals_is_exact():
+    c = vase_cloud(500, 0.0, 4)
+    uv = torch.rand(500, 2, generator=torch.Generator().manual_seed(1), dtype=F64)
+    p = c.surface.evaluate(uv)
+    n = c.surface.normals(uv)
+    ax = revolution_axis(p, n)
+    assert axis_angle_degrees(ax.direction, c.axis_direction) < 1e-6
+
+
+def test_revolution_axis_ignores_outlier_lines():
+    c = vase_cloud(1000, 0.0, 5)
+    uv = torch.rand(1000, 2, generator=torch.Generator().manual_seed(2), dtype=F64)
+    p, n = c.surface.evaluate(uv), c.surface.normals(uv)
+    g = torch.Generator().manual_seed(3)
+    n[:150] = torch.randn(150, 3, generator=g, dtype=F64)  # 15 % random normal lines
+    ax = revolution_axis(p, n)
+    assert axis_angle_degrees(ax.direction, c.axis_direction) < 0.05
+
+
+@pytest.mark.parametrize("kind", ["L", "smooth"])
+def test_extrusion_direction_clean(kind):
+    c = extrusion_cloud(2000, 0.0, 0, kind)
+    d, spread = extrusion_direction(estimate_normals(c.points, 24))
+    assert axis_angle_degrees(d, c.axis_direction) < 0.5
+    assert spread < 0.05
+
+
+@pytest.mark.parametrize("kind,seed", [
+    ("revolution", 0), ("revolution", 1),
+    # known gap: an extruded L at 1 % noise ends about 1 degree off (normals at the corner
+    # and the short legs); at 0.5 % noise it is within 0.2 (benchmarks/bench_shapes.py)
+    pytest.param("extrusion", 0, marks=pytest.mark.xfail(strict=True, reason="L at 1 % noise: ~1 degree")),
+])
+@pytest.mark.slow
+def test_axis_after_refinement_with_one_percent_noise(kind, seed):
+    c = vase_cloud(2000, 0.01, seed) if kind == "revolution" else extrusion_cloud(2000, 0.01, seed, "L")
+    fit = fit_shape(c.points, kind)
+    assert axis_angle_degrees(fit.axis["direction"], c.axis_direction) < 0.5
+
+
+def test_order_points_follows_the_curve():
+    t = torch.rand(600, generator=torch.Generator().manual_seed(0), dtype=F64)
+    xy = torch.stack([torch.cos(3 * t), torch.sin(3 * t) + t], -1)  # a spiral-like open curve
+    u = torch.as_tensor(order_points(xy.numpy()))
+    # monotone (either direction) in the true parameter
+    order = torch.argsort(t)
+    du = torch.diff(u[order])
+    frac = max(float((du >= -1e-3).float().mean()), float((du <= 1e-3).float().mean()))
+    assert frac > 0.99
+
+
+def test_vase_round_trip():
+    c = vase_cloud(1500, 0.0, 7)
+    fit = fit_shape(c.points, "revolution")
+    assert fit.kind == "revolution"
+    assert fit.distance_mean < 1e-3
+    # against the metrics module: the same number
+    m = surface_distances(fit.surface, c.points)
+    assert abs(m["to_surface_mean"] - fit.distance_mean) < 1e-6
+    # the true surface is covered too: its samples are near the fit
+    truth = c.surface.sample((30, 30)).reshape(-1, 3)
+    assert surface_distances(fit.surface, truth)["to_surface_mean"] < 1e-3
+    assert fit.surface.weights.min() > 0 and fit.angle == pytest.approx(2 * math.pi)
+    assert fit.surface.degrees[0] == 2 and fit.surface.sizes[0] == 9
+
+
+def test_extruded_l_round_trip():
+    c = extrusion_cloud(1500, 0.0, 3, "L")
+    fit = fit_shape(c.points, "extrusion")
+    assert fit.kind == "extrusion" and fit.surface.degrees[0] == 1
+    assert fit.distance_mean < 1e-3
+    truth = c.surface.sample((10, 40)).reshape(-1, 3)
+    assert surface_distances(fit.surface, truth)["to_surface_mean"] < 1e-3
+
+
+def test_partial_revolution_angle():
+    c = vase_cloud(1500, 0.0, 2, angle=math.pi)
+    fit = fit_shape(c.points, "revolution", iterations=10)
+    assert abs(fit.angle - math.pi) < math.radians(5)
+    assert fit.distance_mean < 1e-3
+
+
+@pytest.mark.slow
+def test_auto_chooses_by_residual():
+    fit = fit_shape(vase_cloud(1200, 0.0, 8).points, "auto", iterations=10)
+    assert fit.kind == "revolution", fit.reason
+    assert "revolution" in fit.reason and fit.candidates["extrusion"] > fit.candidates["revolution"]
+    fit = fit_shape(extrusion_cloud(1200, 0.0, 8, "smooth").points, "auto", iterations=10)
+    assert fit.kind == "extrusion", fit.reason
+
+
+def test_plane_is_refused():
+    g = torch.Generator().manual_seed(0)
+    xy = torch.rand(500, 2, generator=g, dtype=F64)
+    plane = torch.cat([xy, torch.zeros(500, 1, dtype=F64)], 1) @ torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=F64))[0]
+    for kind in ("revolution", "extrusion"):
+        with pytest.raises(InputError, match="single plane"):
+            fit_shape(plane, kind)
+    with pytest.raises(InputError, match="plane"):
+        fit_shape(plane, "auto", freeform=False)
+
+
+def test_bad_kind_and_too_few_points():
+    with pytest.raises(OptionError, match="kind"):
+        fit_shape(torch.rand(100, 3), "cone")
+    with pytest.raises(InputError, match="at least 30"):
+        fit_shape(torch.rand(10, 3), "revolution")
+
+
+def test_docstring_examples():
+    import doctest
+
+    from nurbskit.shapes import axis, fit, normals
+
+    for module in (axis, normals, fit):
+        assert doctest.testmod(module, raise_on_error=False).failed == 0, module.__name__
+
+
+def test_real_cylinder_mesh(shared_data):
+    """classic_meshes/cylinder.obj (a capped cylinder along y, radius 1): auto finds the revolution."""
+    from nurbskit.geometry.sampling import sample_mesh
+    from nurbskit.io import read_mesh
+
+    mesh = read_mesh(shared_data / "classic_meshes" / "cylinder.obj")
+    pts = torch.as_tensor(sample_mesh(mesh.vertices, mesh.faces, 2000, "uniform", seed=0), dtype=F64)
+    fit = fit_shape(pts, "auto", iterations=10, freeform=False)
+    assert fit.kind == "revolution", fit.reason
+    assert axis_angle_degrees(fit.axis["direction"], [0.0, 1.0, 0.0]) < 0.5
+    assert fit.distance_mean < 2e-3  # the caps' sharp rims are rounded by the cubic profile
