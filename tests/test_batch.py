@@ -163,7 +163,8 @@ def test_fit_folder_six_results_one_recorded_failure_then_resume_does_no_work(cl
     for i in range(6):
         folder = out / f"cloud{i}"
         assert {p.name for p in folder.iterdir()} == {"surface.json", "points.off", "control_points.off",
-                                                    "report.json", "config.json", MARKER}
+                                                    "report.json", "config.json", MARKER,
+                                                    ".nurbskit-manifest.json"}
         report = json.loads((folder / "report.json").read_text())
         assert by[f"cloud{i}"]["metrics"] == {"to_surface_mean": report["metrics"]["to_surface_mean"],
                                               "to_surface_p95": report["metrics"]["to_surface_p95"]}

@@ -25,8 +25,6 @@ import importlib
 import io
 import json
 import os
-import re
-import shutil
 import signal
 import socket
 import threading
@@ -128,17 +126,17 @@ def describe_error(exc: BaseException) -> str:
     return one_line(f"{type(exc).__name__}: {exc}")
 
 
-def _remove_stale(out_root: Path, name: str) -> None:
-    """Remove temporary folders an earlier, killed attempt at ``name`` left in ``out_root``.
+def _forget_marker(out_dir: Path) -> None:
+    """Remove this item's completion marker before it runs again.
 
-    They are :func:`nurbskit._fs.output_directory`'s ``.<name>.XXXXXXXX.tmp`` / ``.old``
-    (mkdtemp's 8-character suffix, so ``a`` never matches ``a.b``'s folders).
+    The marker is batch's own file, not the command's: the command's ``--overwrite``
+    replaces only the files its manifest lists (:mod:`nurbskit._fs`) and refuses a folder
+    holding anything else, so the marker goes first; without it the folder is unfinished
+    work until the new marker is written. Staging folders left by a killed attempt are
+    removed by the command's own output-folder helper.
     """
-    pattern = re.compile(r"^\." + re.escape(name) + r"\.[A-Za-z0-9_]{8}\.(tmp|old)$")
-    with contextlib.suppress(OSError):
-        for entry in os.scandir(out_root):
-            if pattern.match(entry.name):
-                shutil.rmtree(entry.path, ignore_errors=True)
+    with contextlib.suppress(FileNotFoundError, NotADirectoryError):
+        (out_dir / MARKER).unlink()
 
 
 def _raise_in_thread(thread_id: int, exc_type) -> None:
@@ -224,7 +222,7 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
               "metrics": {}, "worker": f"{socket.gethostname()}:{os.getpid()}"}
     try:
         with deadline(timeout, task_key):
-            _remove_stale(out_root_path, item.name)
+            _forget_marker(out_dir)
             args = command_args(command, item, out_dir, options)
             stdout, stderr = io.StringIO(), io.StringIO()
             with _torch_threads(threads), contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
