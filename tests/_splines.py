@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from nurbskit import NURBSCurve, NURBSSurface, NURBSVolume
+
 
 def random_knots(rng: np.random.Generator, n: int, p: int, domain=(0.0, 1.0), repeat: bool = True) -> np.ndarray:
     """Clamped knot vector with random interior knots; one may repeat up to multiplicity p."""
@@ -86,3 +88,25 @@ def sphere_octant(dtype=torch.float64):
             r, z = arc[j]
             cp[i, j] = torch.stack([r * arc[i, 0], r * arc[i, 1], z])
     return NURBSSurface(cp, degrees=(2, 2), weights=arc_w[:, None] * arc_w[None, :])
+
+
+def small_surface(rational=True):
+    """A small fixed rational surface (5 x 4, degrees 2, a non-uniform u knot vector)."""
+    g = torch.Generator().manual_seed(3)
+    cp = torch.rand(5, 4, 3, generator=g, dtype=torch.float64)
+    w = (0.5 + torch.rand(5, 4, generator=g, dtype=torch.float64)) if rational else None
+    ku = torch.tensor([0, 0, 0, 0.3, 0.6, 1, 1, 1], dtype=torch.float64)
+    return NURBSSurface(cp, (2, 2), [ku, None], w)
+
+
+def small_curve():
+    """A rational quarter circle (exact: weights 1, sqrt(2)/2, 1)."""
+    cp = torch.tensor([[1.0, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=torch.float64)
+    return NURBSCurve(cp, 2, None, torch.tensor([1, 2 ** -0.5, 1], dtype=torch.float64))
+
+
+def small_volume():
+    """A small fixed rational volume (3 x 4 x 5, degrees 2, 2, 3)."""
+    g = torch.Generator().manual_seed(4)
+    return NURBSVolume(torch.rand(3, 4, 5, 3, generator=g, dtype=torch.float64), (2, 2, 3),
+                       None, 0.5 + torch.rand(3, 4, 5, generator=g, dtype=torch.float64))

@@ -20,14 +20,6 @@ DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 DTYPES = [torch.float32, torch.float64]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def test_the_fit_configuration_holds_no_device_or_dtype():
     names = {f.name for f in dataclasses.fields(FitConfig)}
     assert "device" not in names and "dtype" not in names

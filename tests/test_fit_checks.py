@@ -24,14 +24,6 @@ from nurbskit.fit.loop import Target
 F64 = torch.float64
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def patch_points(n: int, seed: int = 0) -> torch.Tensor:
     g = torch.Generator().manual_seed(seed)
     uv = torch.rand(n, 2, generator=g, dtype=F64)

@@ -10,29 +10,11 @@ import pytest
 import torch
 
 import nurbskit
+from _splines import small_curve as _curve, small_surface as _surface, small_volume as _volume
 from nurbskit.errors import InputError, OptionError
 from nurbskit.io import read_nurbs, read_weights, write_nurbs
 
 from _assert import assert_close
-
-
-def _surface(rational=True):
-    g = torch.Generator().manual_seed(3)
-    cp = torch.rand(5, 4, 3, generator=g, dtype=torch.float64)
-    w = (0.5 + torch.rand(5, 4, generator=g, dtype=torch.float64)) if rational else None
-    ku = torch.tensor([0, 0, 0, 0.3, 0.6, 1, 1, 1], dtype=torch.float64)
-    return nurbskit.NURBSSurface(cp, (2, 2), [ku, None], w)
-
-
-def _curve():
-    cp = torch.tensor([[1.0, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=torch.float64)
-    return nurbskit.NURBSCurve(cp, 2, None, torch.tensor([1, 2 ** -0.5, 1], dtype=torch.float64))
-
-
-def _volume():
-    g = torch.Generator().manual_seed(4)
-    return nurbskit.NURBSVolume(torch.rand(3, 4, 5, 3, generator=g, dtype=torch.float64), (2, 2, 3),
-                                None, 0.5 + torch.rand(3, 4, 5, generator=g, dtype=torch.float64))
 
 
 def assert_same(a, b):

@@ -21,14 +21,6 @@ from nurbskit.volume.fit import VolumeFitFailed, _check_result, _Recorder
 from nurbskit.volume.shapes import paper_drawings, solid_drawings, sphere_and_box
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def save_drawings(directory, masks) -> dict:
     paths = {}
     for view, mask in masks.items():

@@ -13,14 +13,6 @@ from nurbskit.cli import main
 from nurbskit.volume.shapes import solid_drawings, sphere_and_box
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 @pytest.fixture
 def drawings(tmp_path):
     paths = {}

@@ -11,16 +11,6 @@ from nurbskit.volume.shapes import paper_drawings, solid_drawings, sphere_and_bo
 from _assert import assert_close
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    # Other jobs share the 2 cores; OpenMP barriers under contention cost more than the
-    # second thread gains on these small problems. Results do not depend on it.
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 @pytest.fixture(scope="module")
 def sphere_box():
     return solid_drawings(sphere_and_box, 96)
