@@ -300,7 +300,7 @@ def test_shape_tab_parts():
     assert seg.shape == (1, 2, 3)
     d = seg[0, 1] - seg[0, 0]
     # along z, through (0.5, 0.2), spanning the points' heights with a margin
-    assert_close(np.abs(d / np.linalg.norm(d)), np.array([0.0, 0.0, 1.0]), atol=1e-3)
+    assert_close(np.abs(d / np.linalg.norm(d)), np.array([0.0, 0.0, 1.0]), atol=3e-3)  # within 0.2 degrees
     assert_close(seg[0, :, :2], np.array([[0.5, 0.2], [0.5, 0.2]]), atol=5e-3)  # 0.5 % of the diagonal
     assert min(seg[0, :, 2]) < pts[:, 2].min() and max(seg[0, :, 2]) > pts[:, 2].max()
     md = _shape_markdown(fit)
