@@ -259,7 +259,7 @@ def test_patches_tab_parts(tmp_path):
     assert result.metrics["N"] == len(result) >= 1 and len(result.faces) >= len(result)
     md = _patches_markdown(result)
     m = result.metrics
-    for value in (f"| |N| (patches) | {m['N']} |", f"{m['completeness']:.1f} %", f"{m['P_cov_i']:.1f} %",
+    for value in (f"| \\|N\\| (patches) | {m['N']} |", f"{m['completeness']:.1f} %", f"{m['P_cov_i']:.1f} %",
                   f"{m['P_cov_o']:.1f} %"):
         assert value in md
     v, f = combined_mesh(result)

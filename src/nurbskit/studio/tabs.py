@@ -348,7 +348,8 @@ def _patches_markdown(result) -> str:
     """The metrics of a :class:`~nurbskit.patches.PatchSet` (percentages; |N| a count)."""
     m = result.metrics
     rows = [
-        ("|N| (patches)", f"{int(m.get('N', len(result)))}"),
+        (r"\|N\| (patches)",  # pipes escaped: they would split the table row
+         f"{int(m.get('N', len(result)))}"),
         ("completeness", f"{m.get('completeness', float('nan')):.1f} %"),
         ("P_cov^i (input covered)", f"{m.get('P_cov_i', float('nan')):.1f} %"),
         ("P_cov^o (output covered)", f"{m.get('P_cov_o', float('nan')):.1f} %"),
@@ -472,7 +473,7 @@ def build_patches(session, ui):
 
 # ---- Revolve / Extrude ------------------------------------------------------------------------
 
-AXIS_COLOR = (200, 30, 30)
+AXIS_COLOR = (20, 150, 60)  # green: the control net is red
 
 
 def axis_segment(fit, points: np.ndarray) -> np.ndarray | None:
@@ -503,7 +504,7 @@ def _shape_markdown(fit) -> str:
     ]
     for k, v in (fit.candidates or {}).items():
         if isinstance(v, (int, float)):
-            rows.append((f"{k} (candidate) mean distance", f"{v:.3g}"))
+            rows.append((f"candidate {k}: mean distance", f"{v:.3g} of diag."))
     body = "\n".join(f"| {k} | {v} |" for k, v in rows)
     return "**Report**\n\n| | |\n|---|---|\n" + body + (f"\n\n{fit.reason}" if fit.reason else "")
 
@@ -569,7 +570,7 @@ class ShapeTab:
         seg = axis_segment(fit, self.points)
         if seg is not None:
             self.axis_handle = self.session.client.scene.add_line_segments(
-                "/shape/axis", seg.astype(np.float32), AXIS_COLOR, thickness=4.0)
+                "/shape/axis", seg.astype(np.float32), AXIS_COLOR, thickness=3.0, thickness_units="screen")
         self.session.frame(self.points)
         self.runner.metrics.content = _shape_markdown(fit)
         self.status.info(f"fit finished: {fit.kind}, mean distance {fit.distance_mean:.3g} of the diagonal")
