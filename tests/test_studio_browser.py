@@ -473,7 +473,7 @@ def test_volume_tab(page):
     shot(page, "studio-volume.png")
 
 
-def test_patches_tab(page, area):
+def test_patches_tab(page, area, tmp_path):
     show_tab(page, "Patches")
     tab = page.session.tabs["Patches"]
     field(page, "Path in workdir").fill("corner.ply")
@@ -501,6 +501,21 @@ def test_patches_tab(page, area):
     assert non_background(viewport_pixels(page)) > 2000
     page.locator("td:visible", has_text="P_cov^o").first.scroll_into_view_if_needed()
     shot(page, "studio-patches.png")
+    # the trimmed faces download as STEP (write_cad) and read back with OpenCASCADE
+    from _extras import require_extra
+
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad import read_cad
+
+    field(page, "Export format").click()
+    page.get_by_role("option", name="STEP", exact=True).click()
+    _wait(lambda: tab.export.format.value == "STEP", "the STEP format")
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    assert path.name == "corner-patches.step"
+    assert len(read_cad(path).faces) == len(result.faces)
     outside_untouched(area)
 
 
