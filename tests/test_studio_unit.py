@@ -275,10 +275,11 @@ def test_patches_tab_parts(tmp_path):
     # the export panel writes the trimmed faces with write_cad; other NURBS formats refuse
     require_extra("OCP", "cad")
     from nurbskit.io.cad import read_cad
+    from nurbskit.studio.registry import cad_writers
 
     panel = ExportPanel.__new__(ExportPanel)
     panel.shown = lambda: (result.faces, (v, f), "corner-patches")
-    panel.cad = {k: w for k, w in __import__("nurbskit.studio.registry", fromlist=["x"]).cad_writers().items()}
+    panel.cad = cad_writers()
     assert "STEP" in panel.cad
     panel.format = type("F", (), {"value": "STEP"})()
     panel.write(tmp_path / "corner.step")
