@@ -70,6 +70,12 @@ def area(tmp_path_factory, extras):
     g = torch.stack(torch.meshgrid(torch.linspace(0, 1, 5), torch.linspace(0, 1, 5), indexing="ij"), -1)
     cp = torch.cat([g, 0.3 * torch.sin(3 * g[..., :1]) * g[..., 1:]], -1).double()
     nurbskit.save(nurbskit.NURBSSurface(cp, (3, 3)), workdir / "target.json")
+    # the corner of a box (three faces, 120 points each) and a small cylinder (300 points)
+    a, b, c, zero = rng.random((120, 2)), rng.random((120, 2)), rng.random((120, 2)), np.zeros(120)
+    corner = np.concatenate([np.c_[a, zero], np.c_[b[:, 0], zero, b[:, 1]], np.c_[zero, c]])
+    nurbskit.io.write_points(workdir / "corner.ply", corner)
+    t, z = 2 * np.pi * rng.random(300), rng.random(300)
+    nurbskit.io.write_points(workdir / "cylinder.ply", np.c_[0.3 * np.cos(t), 0.3 * np.sin(t), z])
     (outside / "keep.txt").write_text("outside")
     os.symlink(outside / "keep.txt", workdir / "escape.txt")
     return workdir, outside
@@ -212,7 +218,8 @@ def outside_untouched(area) -> None:
 
 def test_page_shows_tabs_and_draws(page):
     show_tab(page, "NURBS Generator")
-    for name in ("Unsupervised", "Supervised", "NURBS Generator", "Volume from drawings"):
+    for name in ("Unsupervised", "Supervised", "NURBS Generator", "Patches", "Revolve / Extrude",
+                 "Volume from drawings"):
         assert page.get_by_role("tab", name=name, exact=True).is_visible()
     # the generator's first surface is on screen: the viewport is not blank
     _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface to be drawn")
@@ -464,3 +471,74 @@ def test_volume_tab(page):
     assert tab.fit is not None and not tab.fit.mesh.is_empty
     time.sleep(0.5)
     shot(page, "studio-volume.png")
+
+
+def test_patches_tab(page, area, tmp_path):
+    show_tab(page, "Patches")
+    tab = page.session.tabs["Patches"]
+    field(page, "Path in workdir").fill("corner.ply")
+    page.get_by_role("button", name="Load cloud or mesh from workdir").click()
+    see(page, "loaded corner.ply: 360 points", 20000)
+    set_number(page, "Max control grid per patch", 8)
+    set_number(page, "Refinement iterations per final patch", 0)
+    _wait(lambda: tab.max_ctrl.value == 8 and tab.final_iters.value == 0, "the settings")
+    page.get_by_role("button", name="Fit patches").click()
+    see(page, "P_cov^o", 60000)
+    result = tab.result
+    assert result is not None and result.config.max_ctrl == 8 and result.config.final_iters == 0
+    m = result.metrics
+    # the page shows the run's own numbers
+    cells = [t.strip() for t in page.locator("td:visible").all_inner_texts()]
+    row = {cells[i]: cells[i + 1] for i in range(0, len(cells) - 1, 2)}
+    assert row["|N| (patches)"] == str(len(result)), row
+    assert row["completeness"] == f"{m['completeness']:.1f} %", row
+    assert row["P_cov^i (input covered)"] == f"{m['P_cov_i']:.1f} %", row
+    assert row["P_cov^o (output covered)"] == f"{m['P_cov_o']:.1f} %", row
+    # one mesh per patch, each in its own colour, plus the points coloured by patch
+    meshes = [h for h in tab.handles if "/patch" in h.name and "input" not in h.name]
+    assert len(meshes) == sum(1 for p in result.patches if len(p.mesh[1]))
+    time.sleep(0.5)
+    assert non_background(viewport_pixels(page)) > 2000
+    page.locator("td:visible", has_text="P_cov^o").first.scroll_into_view_if_needed()
+    shot(page, "studio-patches.png")
+    # the trimmed faces download as STEP (write_cad) and read back with OpenCASCADE
+    from _extras import require_extra
+
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad import read_cad
+
+    field(page, "Export format").click()
+    page.get_by_role("option", name="STEP", exact=True).click()
+    _wait(lambda: tab.export.format.value == "STEP", "the STEP format")
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    assert path.name == "corner-patches.step"
+    assert len(read_cad(path).faces) == len(result.faces)
+    outside_untouched(area)
+
+
+def test_shape_tab(page, area):
+    show_tab(page, "Revolve / Extrude")
+    tab = page.session.tabs["Revolve / Extrude"]
+    field(page, "Path in workdir").fill("cylinder.ply")
+    page.get_by_role("button", name="Load cloud or mesh from workdir").click()
+    see(page, "loaded cylinder.ply: 300 points", 20000)
+    set_number(page, "Refinement iterations", 10)
+    _wait(lambda: tab.iters.value == 10, "the iteration count")
+    page.get_by_role("button", name="Fit shape").click()
+    see(page, "mean distance", 60000)
+    fit = tab.fit
+    assert fit is not None and fit.kind in ("revolution", "extrusion")
+    cells = " ".join(page.locator("td:visible").all_inner_texts())
+    assert fit.kind in cells and f"{fit.distance_mean:.3g} of diag." in cells
+    # a cylinder along z: the drawn axis (or extrusion direction) is the z axis
+    seg = np.asarray(tab.axis_handle.points, np.float64).reshape(-1, 3)
+    d = seg[1] - seg[0]
+    assert_close(np.abs(d / np.linalg.norm(d)), np.array([0.0, 0.0, 1.0]), atol=3e-3)
+    time.sleep(0.5)
+    assert non_background(viewport_pixels(page)) > 2000
+    page.locator("td:visible", has_text="mean distance").first.scroll_into_view_if_needed()
+    shot(page, "studio-shape.png")
+    outside_untouched(area)

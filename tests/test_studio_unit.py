@@ -223,3 +223,87 @@ def test_only_loopback_hosts_go_without_a_warning(host, loopback):
     from nurbskit.cli.studio_command import is_loopback
 
     assert is_loopback(host) is loopback
+
+
+def box_corner(n: int = 150, seed: int = 0) -> np.ndarray:
+    """Three faces of the unit cube meeting at the origin, ``n`` points each ``(3n, 3)``."""
+    rng = np.random.default_rng(seed)
+    a, b, c = rng.random((n, 2)), rng.random((n, 2)), rng.random((n, 2))
+    zero = np.zeros(n)
+    return np.concatenate([np.c_[a, zero], np.c_[b[:, 0], zero, b[:, 1]], np.c_[zero, c]])
+
+
+def small_cylinder(n: int = 300, seed: int = 0) -> np.ndarray:
+    """Radius 0.3, height 1, axis the z axis through (0.5, 0.2, *): ``(n, 3)``."""
+    rng = np.random.default_rng(seed)
+    t, z = 2 * np.pi * rng.random(n), rng.random(n)
+    return np.c_[0.5 + 0.3 * np.cos(t), 0.2 + 0.3 * np.sin(t), z]
+
+
+def test_registry_lists_the_patches_and_shape_tabs():
+    labels = [t.label for t in available_tabs()]
+    assert "Patches" in labels and "Revolve / Extrude" in labels
+    spec = {t.label: t for t in TABS}
+    assert spec["Revolve / Extrude"].requires == "nurbskit.shapes" and spec["Revolve / Extrude"].attribute == "fit_shape"
+
+
+def test_patches_tab_parts(tmp_path):
+    """The tab's report, combined mesh and STEP export of a box corner's trimmed faces."""
+    import nurbskit
+    from nurbskit.patches import PatchConfig
+    from nurbskit.studio.app import ExportPanel
+    from nurbskit.studio.tabs import _patches_markdown, combined_mesh, patch_color
+    from _extras import require_extra
+
+    result = nurbskit.fit_patches(box_corner(), normals=None, config=PatchConfig(final_iters=0))
+    assert result.metrics["N"] == len(result) >= 1 and len(result.faces) >= len(result)
+    md = _patches_markdown(result)
+    m = result.metrics
+    for value in (f"| \\|N\\| (patches) | {m['N']} |", f"{m['completeness']:.1f} %", f"{m['P_cov_i']:.1f} %",
+                  f"{m['P_cov_o']:.1f} %"):
+        assert value in md
+    v, f = combined_mesh(result)
+    assert len(v) == sum(len(p.mesh[0]) for p in result.patches)
+    assert len(f) == sum(len(p.mesh[1]) for p in result.patches)
+    last = 0
+    for p in result.patches:  # each patch's triangles index its own vertices in the combined mesh
+        fp = f[last:last + len(p.mesh[1])]
+        assert_close(v[fp], np.asarray(p.mesh[0])[np.asarray(p.mesh[1])], atol=0.0)
+        last += len(p.mesh[1])
+    assert len({patch_color(i) for i in range(len(result))}) == len(result)
+
+    # the export panel writes the trimmed faces with write_cad; other NURBS formats refuse
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad import read_cad
+    from nurbskit.studio.registry import cad_writers
+
+    panel = ExportPanel.__new__(ExportPanel)
+    panel.shown = lambda: (result.faces, (v, f), "corner-patches")
+    panel.cad = cad_writers()
+    assert "STEP" in panel.cad
+    panel.format = type("F", (), {"value": "STEP"})()
+    panel.write(tmp_path / "corner.step")
+    assert len(read_cad(tmp_path / "corner.step").faces) == len(result.faces)
+    panel.format.value = "nurbskit JSON"
+    with pytest.raises(OptionError, match="trimmed patches export as"):
+        panel.write(tmp_path / "corner.json")
+    assert not (tmp_path / "corner.json").exists()
+
+
+def test_shape_tab_parts():
+    """The report and the axis segment of a cylinder fitted as a surface of revolution."""
+    from nurbskit.shapes import fit_shape
+    from nurbskit.studio.tabs import _shape_markdown, axis_segment
+
+    pts = small_cylinder()
+    fit = fit_shape(pts, "revolution", iterations=5)
+    seg = axis_segment(fit, pts)
+    assert seg.shape == (1, 2, 3)
+    d = seg[0, 1] - seg[0, 0]
+    # along z, through (0.5, 0.2), spanning the points' heights with a margin
+    assert_close(np.abs(d / np.linalg.norm(d)), np.array([0.0, 0.0, 1.0]), atol=3e-3)  # within 0.2 degrees
+    assert_close(seg[0, :, :2], np.array([[0.5, 0.2], [0.5, 0.2]]), atol=5e-3)  # 0.5 % of the diagonal
+    assert min(seg[0, :, 2]) < pts[:, 2].min() and max(seg[0, :, 2]) > pts[:, 2].max()
+    md = _shape_markdown(fit)
+    assert "| kind | revolution |" in md and f"{fit.distance_mean:.3g} of diag." in md
+    assert "axis direction" in md

@@ -1,9 +1,10 @@
 """``nurbskit studio``: the thesis's visual tool (section 5.2), in the browser.
 
 A viser server (the ``[studio]`` extra) with one tab per capability of the library:
-Unsupervised and Supervised fitting, the NURBS Generator, Volume from drawings, and
-more tabs as capabilities land (see :mod:`.registry`). The studio holds no
-reconstruction logic: every tab calls nurbskit's public API.
+Unsupervised and Supervised fitting, the NURBS Generator, Patches (multi-patch fitting),
+Revolve / Extrude, Volume from drawings, and more tabs as capabilities land (see
+:mod:`.registry`). The studio holds no reconstruction logic: every tab calls nurbskit's
+public API.
 
 Example:
     >>> from nurbskit.studio import StudioOptions, Studio   # doctest: +SKIP

@@ -281,6 +281,13 @@ class ExportPanel:
             return
         if obj is None:
             raise OptionError("nothing to export as NURBS yet; load, fit or create an object first")
+        if isinstance(obj, (list, tuple)):
+            # trimmed faces (a PatchSet's): only the CAD writers keep the trims
+            if fmt not in self.cad:
+                raise OptionError(f"{fmt}: the trimmed patches export as {', '.join(self.cad) or 'STEP (needs [cad])'}"
+                                  " or as an OBJ/PLY mesh")
+            self.cad[fmt][1](list(obj), path)
+            return
         obj = obj.detach()
         if fmt in self.cad:
             self.cad[fmt][1](obj, path)  # write_cad: the format from the extension; read back and checked

@@ -47,7 +47,7 @@ TABS: tuple[TabSpec, ...] = (
     # Multi-patch fitting (nurbskit.fit_patches -> PatchSet): the tab appears once the
     # module exists; its builder lives beside the others (see docs/studio.md).
     TabSpec("Patches", "nurbskit.patches", "fit_patches", "nurbskit.studio.tabs:build_patches"),
-    TabSpec("Revolve / Extrude", "nurbskit.revolve", None, "nurbskit.studio.tabs:build_revolve"),
+    TabSpec("Revolve / Extrude", "nurbskit.shapes", "fit_shape", "nurbskit.studio.tabs:build_shape"),
     TabSpec("Curves from images", "nurbskit.curves", None, "nurbskit.studio.tabs:build_curves"),
     TabSpec("Volume from drawings", "nurbskit.volume", "fit_silhouettes", "nurbskit.studio.tabs:build_volume"),
 )

@@ -1,8 +1,9 @@
-"""The fitting tabs: Unsupervised, Supervised and Volume from drawings.
+"""The fitting tabs: Unsupervised, Supervised, Patches, Revolve / Extrude, Volume from drawings.
 
 Each tab is a thin layer over the library's public API: it reads with
 ``nurbskit.io``, samples meshes with ``nurbskit.sample_mesh``, fits with
-``nurbskit.fit_surface`` / ``nurbskit.fit_silhouettes``, reports with
+``nurbskit.fit_surface`` / ``nurbskit.fit_patches`` / ``nurbskit.shapes.fit_shape`` /
+``nurbskit.fit_silhouettes``, reports with
 ``nurbskit.fit.fit_report``, and draws with :mod:`.scene`. The widgets (loader, run
 panel, export) are the shared ones of :mod:`.app`.
 """
@@ -79,6 +80,25 @@ def _metrics_markdown(report: dict) -> str:
     return "**Metrics**\n\n| | |\n|---|---|\n" + body
 
 
+def _read_cloud(path: Path, name: str, count: int):
+    """``(points (N, 3) float64, what)`` from a point cloud, or ``count`` Poisson samples of a mesh."""
+    import nurbskit
+
+    try:
+        mesh = nurbskit.io.read_mesh(path)
+    except InputError as exc:
+        if "no faces" not in str(exc) and "point cloud" not in str(exc):
+            raise InputError(f"{name}: {exc}".replace(str(path), name)) from None
+        mesh = None
+    except Exception as exc:  # noqa: BLE001 - a reader's own words, with the client's name
+        raise InputError(f"{name}: not a readable point cloud or mesh ({str(exc).replace(str(path), name)})") from None
+    if mesh is not None:
+        pts = nurbskit.sample_mesh(mesh.vertices, mesh.faces, count, method="poisson", seed=0)
+        return np.asarray(pts, dtype=np.float64), f"mesh, {count:,} Poisson samples"
+    cloud = nurbskit.io.read_points(path)
+    return np.asarray(cloud.points, dtype=np.float64), "cloud"
+
+
 # ---- Unsupervised -----------------------------------------------------------------------
 
 class UnsupervisedTab:
@@ -112,22 +132,7 @@ class UnsupervisedTab:
 
     # loading
     def _read(self, path: Path, name: str):
-        import nurbskit
-
-        try:
-            mesh = nurbskit.io.read_mesh(path)
-        except InputError as exc:
-            if "no faces" not in str(exc) and "point cloud" not in str(exc):
-                raise InputError(f"{name}: {exc}".replace(str(path), name)) from None
-            mesh = None
-        except Exception as exc:  # noqa: BLE001 - a reader's own words, with the client's name
-            raise InputError(f"{name}: not a readable point cloud or mesh ({str(exc).replace(str(path), name)})") from None
-        if mesh is not None:
-            n = int(self.count.value)
-            pts = nurbskit.sample_mesh(mesh.vertices, mesh.faces, n, method="poisson", seed=0)
-            return np.asarray(pts, dtype=np.float64), f"mesh, {n:,} Poisson samples"
-        cloud = nurbskit.io.read_points(path)
-        return np.asarray(cloud.points, dtype=np.float64), "cloud"
+        return _read_cloud(path, name, int(self.count.value))
 
     def _loaded(self, data, name: str) -> None:
         points, what = data
@@ -324,6 +329,259 @@ class SupervisedTab:
 
 def build_supervised(session, ui):
     return SupervisedTab(session, ui)
+
+
+# ---- Patches ------------------------------------------------------------------------------
+
+# one colour per patch, cycled (tab10-like, readable on the white background)
+PATCH_COLORS = (
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+)
+
+
+def patch_color(i: int) -> tuple[int, int, int]:
+    return PATCH_COLORS[i % len(PATCH_COLORS)]
+
+
+def _patches_markdown(result) -> str:
+    """The metrics of a :class:`~nurbskit.patches.PatchSet` (percentages; |N| a count)."""
+    m = result.metrics
+    rows = [
+        (r"\|N\| (patches)",  # pipes escaped: they would split the table row
+         f"{int(m.get('N', len(result)))}"),
+        ("completeness", f"{m.get('completeness', float('nan')):.1f} %"),
+        ("P_cov^i (input covered)", f"{m.get('P_cov_i', float('nan')):.1f} %"),
+        ("P_cov^o (output covered)", f"{m.get('P_cov_o', float('nan')):.1f} %"),
+        ("E_fid (mean inlier distance / eps)", f"{m.get('E_fid', float('nan')):.1f} %"),
+        ("eps", f"{result.eps:.4g} ({m.get('eps', float('nan')):.3g} of diag.)"),
+        ("trimmed faces", f"{len(result.faces)}"),
+    ]
+    if result.timings:
+        rows.append(("seconds", f"{sum(float(v) for v in result.timings.values()):.2f}"))
+    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
+    return "**Metrics**\n\n| | |\n|---|---|\n" + body
+
+
+def combined_mesh(result) -> tuple[np.ndarray, np.ndarray]:
+    """All patches' trimmed meshes as one ``vertices (V, 3)``, ``faces (F, 3)``."""
+    verts, faces, base = [], [], 0
+    for patch in result.patches:
+        v, f = np.asarray(patch.mesh[0], np.float64).reshape(-1, 3), np.asarray(patch.mesh[1], np.int64).reshape(-1, 3)
+        verts.append(v)
+        faces.append(f + base)
+        base += len(v)
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+class PatchesTab:
+    """Load a cloud or mesh, fit a few trimmed NURBS patches (``nurbskit.fit_patches``)."""
+
+    label = "Patches"
+
+    def __init__(self, session, ui):
+        self.session = session
+        self.root = session.client.scene.add_frame("/patches", show_axes=False)
+        self.points: np.ndarray | None = None
+        self.name = "cloud"
+        self.result = None
+        self.handles: list = []
+        self.status = Status(session, ui)
+        self.count = ui.add_number("Poisson samples of a mesh", 3000, min=20, max=200000, step=1)
+        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        self.eps = ui.add_number("eps (fraction of the diagonal)", 0.01, min=1e-4, max=0.5, step=1e-4)
+        self.weights = ui.add_vector3("Weights (fidelity, simplicity, coverage)", (0.3, 0.4, 0.3),
+                                      min=(0.0, 0.0, 0.0), max=(10.0, 10.0, 10.0), step=0.05)
+        self.max_ctrl = ui.add_number("Max control grid per patch", 12, min=4, max=64, step=1)
+        self.final_iters = ui.add_number("Refinement iterations per final patch", 15, min=0, max=1000, step=1)
+        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
+        self.show_points = ui.add_checkbox("Show the input points", True)
+        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit patches")
+        self.export = ExportPanel(session, ui, self.status, self.shown)
+
+    def _read(self, path: Path, name: str):
+        return _read_cloud(path, name, int(self.count.value))
+
+    def _clear(self) -> None:
+        for h in self.handles:
+            h.remove()
+        self.handles = []
+
+    def _loaded(self, data, name: str) -> None:
+        points, what = data
+        if points.shape[0] < 20:
+            raise InputError(f"{name}: {points.shape[0]} points; multi-patch fitting needs at least 20")
+        self.points, self.name, self.result = points, Path(name).stem or "cloud", None
+        self.session.focus(self.label)
+        self._clear()
+        self.handles.append(draw_points(self.session.client.scene, "/patches/input", points))
+        self.session.frame(points)
+        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
+
+    def config(self):
+        from ..patches import PatchConfig
+
+        max_ctrl = int(self.max_ctrl.value)
+        return PatchConfig(eps=float(self.eps.value), weights=tuple(float(w) for w in self.weights.value),
+                           max_ctrl=max_ctrl, min_ctrl=min(PatchConfig.min_ctrl, max_ctrl),
+                           final_iters=int(self.final_iters.value), device=self.device.value).validate()
+
+    def _fit(self, progress, stop):
+        import nurbskit
+
+        if self.points is None:
+            raise OptionError("load a point cloud or mesh first")
+        cfg = self.config()
+        progress(0.0)
+
+        def report(stage, done, total):
+            # the stages report their own counts; the bar shows the share of the current one
+            progress(min(0.99, done / max(1, total)))
+
+        return nurbskit.fit_patches(self.points, normals=None, config=cfg, progress=report)
+
+    def _done(self, result) -> None:
+        self.result = result
+        self.session.focus(self.label)
+        self._clear()
+        scene = self.session.client.scene
+        for i, patch in enumerate(result.patches):
+            v, f = patch.mesh
+            if len(f):
+                self.handles.append(draw_mesh(scene, f"/patches/patch{i}", v, f, color=patch_color(i)))
+        if self.show_points.value:
+            colors = np.array([(60, 60, 60)] * len(result.points), dtype=np.uint8)
+            inl = result.labels >= 0
+            colors[inl] = np.array([patch_color(int(k)) for k in result.labels[inl]], dtype=np.uint8)
+            self.handles.append(draw_points(scene, "/patches/input", result.points, colors))
+        v, _ = combined_mesh(result)
+        self.session.frame(v if len(v) else result.points)
+        self.runner.metrics.content = _patches_markdown(result)
+        self.status.info(f"fit finished: {len(result)} patches, {len(result.faces)} trimmed faces")
+
+    def shown(self):
+        if self.result is None:
+            return None, None, f"{self.name}-patches"
+        return self.result.faces, combined_mesh(self.result), f"{self.name}-patches"
+
+
+def build_patches(session, ui):
+    return PatchesTab(session, ui)
+
+
+# ---- Revolve / Extrude ------------------------------------------------------------------------
+
+AXIS_COLOR = (20, 150, 60)  # green: the control net is red
+
+
+def axis_segment(fit, points: np.ndarray) -> np.ndarray | None:
+    """The fitted axis (or extrusion direction) as one segment ``(1, 2, 3)`` spanning the points."""
+    if fit.axis is None:
+        return None
+    p = np.asarray(fit.axis["point"], np.float64)
+    d = np.asarray(fit.axis["direction"], np.float64)
+    d = d / (np.linalg.norm(d) or 1.0)
+    t = (np.asarray(points, np.float64).reshape(-1, 3) - p) @ d
+    pad = 0.15 * (float(t.max() - t.min()) or 1.0)
+    return np.stack([p + (t.min() - pad) * d, p + (t.max() + pad) * d])[None]
+
+
+def _shape_markdown(fit) -> str:
+    """The report of a :class:`~nurbskit.shapes.ShapeFit`."""
+    rows = [("kind", fit.kind)]
+    if fit.axis is not None:
+        p, d = fit.axis["point"], fit.axis["direction"]
+        rows.append(("axis point" if fit.kind == "revolution" else "point", ", ".join(f"{x:.4g}" for x in p)))
+        rows.append(("axis direction" if fit.kind == "revolution" else "extrusion direction",
+                     ", ".join(f"{x:.4g}" for x in d)))
+    rows += [
+        ("mean distance", f"{fit.distance_mean:.3g} of diag. ({fit.distance_mean * fit.diagonal:.4g})"),
+        ("95th percentile distance", f"{fit.distance_p95:.3g} of diag."),
+        ("control grid", " x ".join(str(n) for n in fit.surface.sizes)),
+        ("seconds", f"{fit.seconds:.2f}"),
+    ]
+    for k, v in (fit.candidates or {}).items():
+        if isinstance(v, (int, float)):
+            rows.append((f"candidate {k}: mean distance", f"{v:.3g} of diag."))
+    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
+    return "**Report**\n\n| | |\n|---|---|\n" + body + (f"\n\n{fit.reason}" if fit.reason else "")
+
+
+class ShapeTab:
+    """Load a cloud or mesh, fit an exact surface of revolution or extrusion (``fit_shape``)."""
+
+    label = "Revolve / Extrude"
+
+    def __init__(self, session, ui):
+        from ..shapes import KINDS
+
+        self.session = session
+        self.root = session.client.scene.add_frame("/shape", show_axes=False)
+        self.points: np.ndarray | None = None
+        self.name = "cloud"
+        self.fit = None
+        self.axis_handle = None
+        self.status = Status(session, ui)
+        self.count = ui.add_number("Poisson samples of a mesh", 2000, min=30, max=200000, step=1)
+        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        kinds = ("auto",) + tuple(k for k in KINDS if k != "auto")
+        self.kind = ui.add_dropdown("Kind", kinds, initial_value="auto")
+        self.iters = ui.add_number("Refinement iterations", 30, min=0, max=1000, step=1)
+        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit shape")
+        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.surface_view = SplineView(session.client.scene, "/shape/surface", RESULT_COLOR)
+
+    def _read(self, path: Path, name: str):
+        return _read_cloud(path, name, int(self.count.value))
+
+    def _loaded(self, data, name: str) -> None:
+        points, what = data
+        if points.shape[0] < 30:
+            raise InputError(f"{name}: {points.shape[0]} points; a shape fit needs at least 30")
+        self.points, self.name, self.fit = points, Path(name).stem or "cloud", None
+        self.session.focus(self.label)
+        self.surface_view.clear()
+        if self.axis_handle is not None:
+            self.axis_handle.remove()
+            self.axis_handle = None
+        draw_points(self.session.client.scene, "/shape/input", points)
+        self.session.frame(points)
+        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
+
+    def _fit(self, progress, stop):
+        from ..shapes import fit_shape
+
+        if self.points is None:
+            raise OptionError("load a point cloud or mesh first")
+        progress(0.0)
+        iters = int(self.iters.value)
+        return fit_shape(self.points, self.kind.value, refine=iters > 0, iterations=max(iters, 1))
+
+    def _done(self, fit) -> None:
+        self.fit = fit
+        self.session.focus(self.label)
+        self.surface_view.shape_key = None
+        self.surface_view.draw(fit.surface.detach().to(torch.float64))
+        if self.axis_handle is not None:
+            self.axis_handle.remove()
+            self.axis_handle = None
+        seg = axis_segment(fit, self.points)
+        if seg is not None:
+            self.axis_handle = self.session.client.scene.add_line_segments(
+                "/shape/axis", seg.astype(np.float32), AXIS_COLOR, thickness=3.0, thickness_units="screen")
+        self.session.frame(self.points)
+        self.runner.metrics.content = _shape_markdown(fit)
+        self.status.info(f"fit finished: {fit.kind}, mean distance {fit.distance_mean:.3g} of the diagonal")
+
+    def shown(self):
+        surface = None if self.fit is None else self.fit.surface.detach().to(torch.float64)
+        return surface, None, f"{self.name}-{self.fit.kind if self.fit is not None else 'shape'}"
+
+
+def build_shape(session, ui):
+    return ShapeTab(session, ui)
 
 
 # ---- Volume from drawings ------------------------------------------------------------------
