@@ -503,3 +503,24 @@ def test_cuda_projection_matches_cpu(dtype, monkeypatch):
     monkeypatch.setattr(P, "_COARSE_PAIRS", 0)
     coarse = project_points(s.to("cuda"), p.cuda())
     assert_close(coarse.distance.cpu(), truth.to(dtype), atol=1e-12 if dtype == F64 else 2e-6)
+
+
+def test_closed_clamped_direction_wraps_across_the_seam():
+    # A full revolution (the clamped nine-point circle) is closed but not periodic: its
+    # seam is only C0 in the parameter. Points whose foot point lies just before the seam
+    # used to stop on it (found with a revolved vase: 0.04 off); now the step wraps.
+    from nurbskit import revolve
+    from nurbskit.core.project import periodic_directions
+
+    line = NURBSCurve(torch.tensor([[2.0, 0.0, -1.0], [2.0, 0.0, 1.0]], dtype=torch.float64), 1)
+    cylinder = revolve(line, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    assert periodic_directions(cylinder) == (True, False)
+    angles = torch.cat([torch.linspace(-0.3, -1e-6, 40), torch.linspace(1e-6, 0.3, 40)]).double()
+    rho = torch.linspace(1.5, 2.5, 80, dtype=torch.float64)
+    p = torch.stack([rho * torch.cos(angles), rho * torch.sin(angles), torch.linspace(-0.9, 0.9, 80).double()], -1)
+    res = project_points(cylinder, p)
+    assert_close(res.distance, (rho - 2.0).abs(), atol=1e-12)
+    assert bool(((res.params[:, 0] >= 0) & (res.params[:, 0] <= 1)).all())
+    # the foot points are the radial ones: on the circle of radius 2, at the points' angles
+    assert_close(res.closest[:, :2].norm(dim=-1), torch.full((80,), 2.0, dtype=torch.float64), atol=1e-12)
+    assert_close(torch.atan2(res.closest[:, 1], res.closest[:, 0]), angles, atol=1e-12)

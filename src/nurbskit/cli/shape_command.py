@@ -114,7 +114,7 @@ def run_shape(args) -> int:
 
     if args.iters < 0:
         raise OptionError(f"--iters must be >= 0, got {args.iters}")
-    check_output_dir(args.out, args.overwrite)
+    check_output_dir(args.out, args.overwrite, inputs=[args.input])
     path = Path(args.input)
     if not path.exists():
         raise InputError(f"{path}: no such file")
@@ -130,7 +130,7 @@ def run_shape(args) -> int:
     metrics = evaluate_fit(fit.surface, points, (64, 64))
     report = shape_report(fit, metrics)
     files = ["surface.json", "report.json"]
-    with output_directory(args.out, args.overwrite) as tmp:
+    with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         save(fit.surface, tmp / "surface.json")
         if not args.no_figures:
             from ..viz.plots import plot_clouds

@@ -390,12 +390,14 @@ def nearest_grid_params(spline, points: Tensor, grid: int | Sequence[int] | None
 
 
 def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
-    """Which parametric directions are periodic: a periodic knot spacing and the last
-    ``p`` control columns (and weights) repeating the first ``p``.
-
-    Such a direction is closed with continuity ``C^{p-1}`` at the seam (the fit's closed
-    v, :func:`nurbskit.fit.params.periodic_knots`): the curve leaves the domain's end and
-    comes back in at its start. Equality is up to ``tol`` relative to the size of the
+    """Which parametric directions close on themselves, so that projection wraps across
+    the seam: either periodic (a periodic knot spacing and the last ``p`` control columns
+    and weights repeating the first ``p``: continuity ``C^{p-1}`` at the seam, the fit's
+    closed v, :func:`nurbskit.fit.params.periodic_knots`) or closed and clamped (end
+    knots of multiplicity ``p + 1`` and the last control column and weights equal to the
+    first, as a full revolution's nine-point circle: the seam is only ``C^0`` in the
+    parameter, but the point at the domain's end is the point at its start, so a Newton
+    step may leave at one end and come back in at the other). Equality is up to ``tol`` relative to the size of the
     control net (default ``64 eps``). Reads a few values back to the host: pass
     ``periodic=`` to :func:`project_points` inside loops.
 
@@ -424,7 +426,10 @@ def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
             same_gaps = bool(((gaps[: 2 * p] - gaps[n - p : n + p]).abs() <= rel * span).all())
             same_cp = bool(((cp.narrow(a, 0, p) - cp.narrow(a, n - p, p)).abs() <= rel * size).all())
             same_w = bool(((w.narrow(a, 0, p) - w.narrow(a, n - p, p)).abs() <= rel * w.abs().amax()).all())
-            out.append(same_gaps and same_cp and same_w)
+            clamped = bool((gaps[:p].abs() <= rel * span).all() and (gaps[n:].abs() <= rel * span).all())
+            closed_cp = bool(((cp.narrow(a, 0, 1) - cp.narrow(a, n - 1, 1)).abs() <= rel * size).all())
+            closed_w = bool(((w.narrow(a, 0, 1) - w.narrow(a, n - 1, 1)).abs() <= rel * w.abs().amax()).all())
+            out.append((same_gaps and same_cp and same_w) or (clamped and closed_cp and closed_w))
         return tuple(out)
 
 
