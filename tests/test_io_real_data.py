@@ -113,7 +113,7 @@ def test_abc_stl_matches_trimesh(shared_data):
     ref = trimesh.load(path)  # trimesh merges equal corners, as nurbskit does
     assert mesh.vertices.shape == ref.vertices.shape == (3795, 3)
     assert mesh.faces.shape == ref.faces.shape == (7614, 3)
-    np.testing.assert_allclose(mesh.vertices[mesh.faces], ref.vertices[ref.faces], atol=0)
+    np.testing.assert_allclose(mesh.vertices[mesh.faces], ref.vertices[ref.faces], rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("name, n, labels", [("abc_00470.xyzc", 10000, 3), ("abc_00949.xyzc", 10000, 16),
