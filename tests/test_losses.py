@@ -45,7 +45,7 @@ def test_l2_batched_and_order_sensitive():
     x, y = _rand(4, 9, 2, seed=3), _rand(4, 9, 2, seed=4)
     out = L.l2_loss(x, y)
     assert out.shape == (4,)
-    torch.testing.assert_close(out[2], L.l2_loss(x[2], y[2]))
+    assert_close(out[2], L.l2_loss(x[2], y[2]))
     assert L.l2_loss(x[0], x[0].flip(0)).item() > 0
 
 
@@ -79,8 +79,8 @@ def test_chamfer_sum_is_thesis_equation_2_7():
 def test_chamfer_symmetric_and_permutation_invariant():
     x, y = _rand(30, 3, seed=5), _rand(21, 3, seed=6)
     a = L.chamfer_distance(x, y)
-    torch.testing.assert_close(a, L.chamfer_distance(y, x))
-    torch.testing.assert_close(a, L.chamfer_distance(x[torch.randperm(30)], y.flip(0)))
+    assert_close(a, L.chamfer_distance(y, x))
+    assert_close(a, L.chamfer_distance(x[torch.randperm(30)], y.flip(0)))
     assert L.chamfer_distance(x, x).item() == 0.0
 
 
@@ -89,7 +89,7 @@ def test_chamfer_batched():
     out = L.chamfer_distance(x, y)
     assert out.shape == (3,)
     for b in range(3):
-        torch.testing.assert_close(out[b], L.chamfer_distance_naive(x[b], y[b]))
+        assert_close(out[b], L.chamfer_distance_naive(x[b], y[b]))
 
 
 def test_chamfer_gradcheck():
@@ -157,8 +157,8 @@ def test_hausdorff_gradient_reaches_only_the_extreme_pair():
     y = torch.tensor([[0.0, 0.0], [1.0, 1.0], [3.0, 0.0]], dtype=F64, requires_grad=True)
     gx, gy = torch.autograd.grad(L.hausdorff_distance(x, y), (x, y))
     # the maximum is |y_2 - x_1| = 2 along +x
-    torch.testing.assert_close(gy, torch.tensor([[0, 0], [0, 0], [1.0, 0]], dtype=F64))
-    torch.testing.assert_close(gx, torch.tensor([[0, 0], [-1.0, 0]], dtype=F64))
+    assert_close(gy, torch.tensor([[0, 0], [0, 0], [1.0, 0]], dtype=F64))
+    assert_close(gx, torch.tensor([[0, 0], [-1.0, 0]], dtype=F64))
 
 
 # ---- Laplacian ----------------------------------------------------------------------
@@ -209,16 +209,16 @@ def test_laplacian_of_paraboloid_closed_form():
     grid = torch.stack([u, v, a * u**2 + b * v**2], -1)
     lap = L.grid_laplacian(grid)
     # interior: mean of the 4 neighbours minus the point = (a hu^2 + b hv^2) / 2 in z
-    torch.testing.assert_close(lap[1:-1, 1:-1, 2], torch.full((4, 3), (a * hu**2 + b * hv**2) / 2, dtype=F64))
+    assert_close(lap[1:-1, 1:-1, 2], torch.full((4, 3), (a * hu**2 + b * hv**2) / 2, dtype=F64))
     assert lap[..., :2].abs().max().item() < 1e-15
     # edge rule: only the along-edge second difference, halved; corners 0
-    torch.testing.assert_close(lap[0, 1:-1, 2], torch.full((3,), b * hv**2 / 2, dtype=F64))
-    torch.testing.assert_close(lap[1:-1, -1, 2], torch.full((4,), a * hu**2 / 2, dtype=F64))
+    assert_close(lap[0, 1:-1, 2], torch.full((3,), b * hv**2 / 2, dtype=F64))
+    assert_close(lap[1:-1, -1, 2], torch.full((4,), a * hu**2 / 2, dtype=F64))
     assert lap[0, 0].abs().max().item() < 1e-15
     # the energy: mean over nodes of |L|^2
     expected = (lap**2).sum(-1).mean()
-    torch.testing.assert_close(L.laplacian_grid(grid), expected)
-    torch.testing.assert_close(L.laplacian_grid(grid, "sum"), expected * 30)
+    assert_close(L.laplacian_grid(grid), expected)
+    assert_close(L.laplacian_grid(grid, "sum"), expected * 30)
 
 
 def test_closed_u_wraps_the_seam_of_a_cylinder():
@@ -248,7 +248,7 @@ def test_laplacian_gradchecks():
 
 def test_supervised_is_energy_of_difference_and_translation_invariant():
     p, t = _rand(2, 5, 6, 3, seed=20), _rand(2, 5, 6, 3, seed=21)
-    torch.testing.assert_close(L.laplacian_supervised(p, t), L.laplacian_grid(p - t))
+    assert_close(L.laplacian_supervised(p, t), L.laplacian_grid(p - t))
     assert L.laplacian_supervised(p, t).shape == (2,)
     shift = torch.tensor([1.0, -2.0, 0.5], dtype=F64)
     assert L.laplacian_supervised(t + shift, t).abs().max().item() < 1e-28
@@ -261,7 +261,7 @@ def test_supervised_is_energy_of_difference_and_translation_invariant():
 def test_laplacian_control_accepts_a_surface():
     cp = _rand(5, 6, 3, seed=22)
     s = NURBSSurface(cp, degrees=(3, 2))
-    torch.testing.assert_close(L.laplacian_control(s), L.laplacian_grid(cp))
+    assert_close(L.laplacian_control(s), L.laplacian_grid(cp))
 
 
 def test_laplacian_errors():
@@ -299,9 +299,9 @@ def test_point_to_surface_plane_closed_form():
     xy = 0.1 + 0.8 * torch.rand(40, 2, generator=g, dtype=F64)
     h = torch.randn(40, generator=g, dtype=F64)
     pts = torch.cat([xy, h[:, None]], -1)
-    torch.testing.assert_close(L.point_to_surface_distance(plane, pts), (h**2).mean())
-    torch.testing.assert_close(L.point_to_surface_distance(plane, pts, squared=False), h.abs().mean())
-    torch.testing.assert_close(L.point_to_surface_distance(plane, pts, "none", squared=False), h.abs())
+    assert_close(L.point_to_surface_distance(plane, pts), (h**2).mean())
+    assert_close(L.point_to_surface_distance(plane, pts, squared=False), h.abs().mean())
+    assert_close(L.point_to_surface_distance(plane, pts, "none", squared=False), h.abs())
 
 
 def _octant_points(n, seed):
@@ -316,10 +316,10 @@ def _octant_points(n, seed):
 def test_point_to_surface_sphere_closed_form_and_point_gradient():
     sphere = _sphere_octant()
     pts, rho, direction = _octant_points(30, seed=24)
-    torch.testing.assert_close(L.point_to_surface_distance(sphere, pts, "none", squared=False), (rho - 1).abs())
+    assert_close(L.point_to_surface_distance(sphere, pts, "none", squared=False), (rho - 1).abs())
     pts.requires_grad_(True)
     (g,) = torch.autograd.grad(L.point_to_surface_distance(sphere, pts, "sum"), (pts,))
-    torch.testing.assert_close(g, 2 * (rho - 1)[:, None] * direction)
+    assert_close(g, 2 * (rho - 1)[:, None] * direction)
 
 
 def test_point_to_surface_control_point_gradient_is_the_envelope_gradient():
