@@ -356,7 +356,7 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
     if not curves:
         return curves
     target = torch.as_tensor(_ink_points(ink))
-    params = [c.control_points.detach().clone().requires_grad_(True) for c in curves]
+    params = [c.control_points.detach().contiguous().clone().requires_grad_(True) for c in curves]
     counts = []
     for c in curves:
         cp = c.control_points.detach().numpy()
@@ -421,6 +421,8 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         if len(s) < 4:  # too few points for a cubic: resample the short segment
             t = np.linspace(0, 1, 4)
             s = np.stack([np.interp(t, np.linspace(0, 1, len(s)), s[:, k]) for k in range(2)], axis=1)
+        if s[0, 0] > s[-1, 0]:  # canonical orientation (as the synthetic targets): first point left of the last
+            s = s[::-1].copy()
         curve, _ = fit_stroke(s, tolerance)
         curves.append(curve)
     if refine_iterations:
