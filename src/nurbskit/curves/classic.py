@@ -250,8 +250,10 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
                     continue  # both ends of one edge (a loop back to the junction)
                 pairs.append((float(dirs[e] @ dirs[f]), e, f))  # -1: straight through
         pairs.sort(key=lambda t: t[0])
+        # Two branches left (a pruned spur, a corner): the stroke passes through, whatever the turn.
+        limit = 1.0 if len(ends) == 2 else -0.5
         for cos, e, f in pairs:
-            if e in partner or f in partner or cos > -0.5:  # turning by more than 60 degrees: no
+            if e in partner or f in partner or cos > limit:  # turning by more than 60 degrees: no
                 continue
             partner[e], partner[f] = f, e
 
@@ -294,9 +296,12 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
     """A clamped B-spline through ordered ``points (N, 2)`` within ``tolerance`` (max distance).
 
     Least squares on chord-length parameters, then ``corrections`` rounds of parameter
-    correction by projection; control points added (from ``degree + 1``) until the
-    largest point-to-curve distance is within ``tolerance`` or ``max_ctrl`` is reached
-    (default ``N // 2``, at least ``degree + 1``). Returns ``(curve, max_distance)``.
+    correction by projection. The number of control points (``degree + 1`` to
+    ``max_ctrl``, default ``N // 2``) is the smallest whose fit after one correction has
+    every residual within ``tolerance``, found by bisection (the residual at the
+    corrected parameters bounds the distance to the curve from above, and falls as
+    control points are added). Returns ``(curve, max_distance)``, the distance by
+    projection.
     """
     import torch
 
@@ -311,30 +316,42 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
     seg = torch.linalg.norm(pts[1:] - pts[:-1], dim=1)
     u_chord = torch.cat([pts.new_zeros(1), torch.cumsum(seg, 0)])
     u_chord = u_chord / u_chord[-1]
-    max_ctrl = max(degree + 1, max_ctrl if max_ctrl is not None else n_pts // 2)
-    best = None
-    n = degree + 1
-    while True:
-        n_ctrl = min(n, max_ctrl)
+    max_ctrl = max(degree + 1, min(max_ctrl if max_ctrl is not None else n_pts // 2, n_pts))
+
+    def solve(n_ctrl, u):
         knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
-        u = u_chord.clone()
-        for step in range(corrections + 1):
-            B = basis_matrix(knots, degree, n_ctrl, u)
-            cp = torch.linalg.lstsq(B, pts).solution
-            if closed:
-                cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
-            curve = NURBSCurve(cp, degree=degree)
-            proj = project_points_curve(curve, pts)
-            if step < corrections:
-                # Keep the order: a foot point behind its predecessor would fold the fit.
-                u = torch.cummax(proj.params.detach().clamp(0, 1), 0).values
-                u = torch.cat([u.new_zeros(1), u[1:-1], u.new_ones(1)])
-        err = float(proj.distance.max())
-        if best is None or err < best[1]:
-            best = (curve, err)
-        if err <= tolerance or n_ctrl >= max_ctrl:
-            return best
-        n = n_ctrl + max(1, n_ctrl // 4)
+        B = basis_matrix(knots, degree, n_ctrl, u)
+        cp = torch.linalg.lstsq(B, pts).solution.contiguous()
+        if closed:
+            cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
+        return NURBSCurve(cp, degree=degree), B @ cp
+
+    def corrected(curve, u):
+        # Foot-point parameters, kept in order: a foot point behind its predecessor would fold the fit.
+        t = project_points_curve(curve, pts).params.detach().clamp(0, 1)
+        t = torch.cummax(t, 0).values
+        return torch.cat([t.new_zeros(1), t[1:-1], t.new_ones(1)])
+
+    def fit(n_ctrl, rounds):
+        u = u_chord
+        curve, at_u = solve(n_ctrl, u)
+        for _ in range(rounds):
+            u = corrected(curve, u)
+            curve, at_u = solve(n_ctrl, u)
+        return curve, float(torch.linalg.norm(at_u - pts, dim=1).max())
+
+    lo, hi = degree + 1, max_ctrl
+    if fit(lo, 1)[1] <= tolerance:
+        hi = lo
+    while lo < hi:  # the smallest n with a bound within tolerance (hi always fits or is the cap)
+        mid = (lo + hi) // 2
+        if fit(mid, 1)[1] <= tolerance:
+            hi = mid
+        else:
+            lo = mid + 1
+    curve, _ = fit(hi, corrections)
+    distance = float(project_points_curve(curve, pts).distance.max())
+    return curve, distance
 
 
 def _ink_points(ink: np.ndarray) -> np.ndarray:
