@@ -35,6 +35,11 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError, OptionError
 
+# Weight of the control polygon's second differences in the least squares (see fit_stroke).
+_SMOOTH = 1e-2
+# Gaussian smoothing (pixels, along the stroke) of the skeleton's staircase before fitting.
+_STROKE_SIGMA = 1.0
+
 # The 8 neighbours of a pixel, as (drow, dcol).
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
@@ -260,13 +265,22 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     # Chain edges into strokes.
     used, strokes = set(), []
 
+    # Near a junction the skeleton bends towards it (the medial axis of a crossing is not
+    # the two centre lines): through a junction, the last pixels of each branch are left
+    # out and the spline bridges the gap.
+    trim = int(np.ceil(width))
+
     def walk(i, side):
         chain = []
         while i not in used:
             used.add(i)
-            path = edges[i][2] if side == 0 else edges[i][2][::-1]
-            chain.extend(path if not chain else path[1:])
+            path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
+            if chain:  # arriving through a junction
+                path = path[min(trim, max(0, len(path) - 2)) + 1:]
+            chain.extend(path)
             nxt = partner.get((i, 1 - side))
+            if nxt is not None and len(chain) > trim + 2:
+                del chain[len(chain) - trim:]
             if nxt is None:
                 break
             i, side = nxt
@@ -316,12 +330,20 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
     seg = torch.linalg.norm(pts[1:] - pts[:-1], dim=1)
     u_chord = torch.cat([pts.new_zeros(1), torch.cumsum(seg, 0)])
     u_chord = u_chord / u_chord[-1]
-    max_ctrl = max(degree + 1, min(max_ctrl if max_ctrl is not None else n_pts // 2, n_pts))
+    length = float(seg.sum())
+    if max_ctrl is None:  # at most one span per 3 px of stroke and 4 points per control point
+        max_ctrl = min(n_pts // 4, int(length / 3) + degree)
+    max_ctrl = max(degree + 1, min(max_ctrl, n_pts))
 
     def solve(n_ctrl, u):
         knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
         B = basis_matrix(knots, degree, n_ctrl, u)
-        cp = torch.linalg.lstsq(B, pts).solution.contiguous()
+        # A faint second-difference penalty on the control polygon keeps spans with few
+        # or no points well posed (no wild control points), and changes nothing else.
+        D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0) * _SMOOTH
+        A = torch.cat([B, D])
+        rhs = torch.cat([pts, pts.new_zeros(len(D), 2)])
+        cp = torch.linalg.lstsq(A, rhs).solution.contiguous()
         if closed:
             cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
         return NURBSCurve(cp, degree=degree), B @ cp
@@ -438,6 +460,13 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         if len(s) < 4:  # too few points for a cubic: resample the short segment
             t = np.linspace(0, 1, 4)
             s = np.stack([np.interp(t, np.linspace(0, 1, len(s)), s[:, k]) for k in range(2)], axis=1)
+        if len(s) > 4:  # the skeleton's pixel staircase is noise of +-0.5 px: smooth it along the stroke
+            from scipy.ndimage import gaussian_filter1d
+
+            closed = bool(np.all(s[0] == s[-1]))
+            s = gaussian_filter1d(s, _STROKE_SIGMA, axis=0, mode="wrap" if closed else "nearest")
+            if closed:
+                s[-1] = s[0]
         if s[0, 0] > s[-1, 0]:  # canonical orientation (as the synthetic targets): first point left of the last
             s = s[::-1].copy()
         curve, _ = fit_stroke(s, tolerance)
