@@ -139,3 +139,22 @@ def test_to_grey_scales_integer_and_colour_images():
     rgba = np.zeros((1, 2, 4), np.uint8)
     rgba[0, 1, 3] = 255  # opaque black beside a transparent pixel (white)
     assert_close(to_grey(rgba), np.array([[1.0, 0.0]]), atol=1e-12)
+
+
+def test_curves_doctests():
+    import doctest
+
+    from nurbskit.curves import api, classic, synthetic
+
+    for module in (api, classic, synthetic):
+        assert doctest.testmod(module, raise_on_error=False).failed == 0
+
+
+def test_a_t_junction_gives_a_bar_and_a_stem():
+    bar = np.array([[10.0, 30.0], [40.0, 30.0], [80.0, 30.0], [118.0, 30.0]])
+    stem = np.array([[64.0, 30.0], [64.0, 60.0], [64.0, 90.0], [64.0, 118.0]])
+    curves = nurbskit.curves_from_image(_draw([bar, stem], width=3.0))
+    assert len(curves) == 2
+    lengths = sorted(np.linalg.norm(np.diff(dense_samples(c), axis=0), axis=1).sum() for c in curves)
+    assert lengths[1] > 100  # the bar is one stroke, not split at the stem
+    assert _symmetric(curves, [bar, stem]) < 1.0
