@@ -350,7 +350,9 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
 
     def corrected(curve, u):
         # Foot-point parameters, kept in order: a foot point behind its predecessor would fold the fit.
-        t = project_points_curve(curve, pts).params.detach().clamp(0, 1)
+        # Warm start at the current parameters (no grid search): the correction follows the
+        # stroke's order, and each Newton start is already near its foot point.
+        t = project_points_curve(curve, pts, params=u, iterations=8).params.detach().clamp(0, 1)
         t = torch.cummax(t, 0).values
         return torch.cat([t.new_zeros(1), t[1:-1], t.new_ones(1)])
 
