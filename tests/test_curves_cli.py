@@ -92,3 +92,14 @@ def test_curves_decompression_bomb_is_refused(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(PILImage, "MAX_IMAGE_PIXELS", 1000)  # 4096 pixels > 2 x 1000: a bomb
     assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 2
     assert "too large" in capsys.readouterr().err
+
+
+def test_curves_a_dot_gives_no_curve_and_valid_json(tmp_path, capsys):
+    grey = np.ones((64, 64))
+    grey[30:33, 30:33] = 0.0
+    src = _write(tmp_path / "dot.png", grey)
+    assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 0
+    assert "0 curves" in capsys.readouterr().out
+    report = json.loads((tmp_path / "o" / "report.json").read_text())  # strict JSON: no Infinity
+    assert report["curves"] == 0 and report["chamfer_px"]["symmetric"] is None
+    assert json.loads((tmp_path / "o" / "curves.json").read_text())["curves"] == []

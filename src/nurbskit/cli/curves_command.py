@@ -131,7 +131,9 @@ def run_curves(args) -> int:
     curves, strokes = fit_image(grey, tolerance=args.tolerance, refine_iterations=args.refine_iters if args.refine else 0,
                                 source=str(args.image))
     seconds = time.perf_counter() - start
-    chamfer = chamfer_to_ink(curves, strokes.ink)
+    # No curve (a dot, a filled blob: no stroke longer than its width): no distances (null).
+    chamfer = chamfer_to_ink(curves, strokes.ink) if curves else {k: None for k in
+                                                                  ("curves_to_ink", "ink_to_curves", "symmetric")}
     h, w = grey.shape
     report = {
         "image": str(args.image),
@@ -156,6 +158,10 @@ def run_curves(args) -> int:
         write_overlay(tmp / "overlay.png", grey, curves)
         with atomic_open(tmp / "report.json", "w") as fh:
             json.dump(report, fh, indent=2)
+    if not curves:
+        print(f"0 curves from {args.image} ({w} x {h}, {report['polarity']}): no stroke longer than its width "
+              f"({strokes.width:.1f} px) in the ink; wrote {Path(args.out)}", file=sys.stdout)
+        return 0
     print(f"{len(curves)} curve(s) from {args.image} ({w} x {h}, {report['polarity']}): Chamfer curves->ink "
           f"{chamfer['curves_to_ink']:.2f} px, ink->curves {chamfer['ink_to_curves']:.2f} px in {seconds:.2f} s; "
           f"wrote {Path(args.out)}", file=sys.stdout)
