@@ -38,6 +38,7 @@ _LAZY = {
     "extrude": ("nurbskit.core.construct", "extrude"),
     "fit_silhouettes": ("nurbskit.volume", "fit_silhouettes"),
     "fit_patches": ("nurbskit.patches", "fit_patches"),
+    "curves_from_image": ("nurbskit.curves.api", "curves_from_image"),
     "io": ("nurbskit.io", None),
     "losses": ("nurbskit.losses", None),
     "metrics": ("nurbskit.metrics", None),

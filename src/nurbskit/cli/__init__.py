@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.patches_command",
     "nurbskit.cli.batch_command",
     "nurbskit.cli.shape_command",
+    "nurbskit.cli.curves_command",
 )
 
 EXIT_BUG = 1

@@ -1,0 +1,1 @@
+"""Spline curves from images (DeepSpline, 2D): synthetic drawings and classical fitting."""

@@ -1,0 +1,478 @@
+"""Classical curve extraction from a drawing, no network: ink, skeleton, strokes, B-splines.
+
+Steps (each a library call where one exists):
+
+1. Ink: the image in grey; Otsu's threshold (``skimage.filters.threshold_otsu``) splits it
+   in two classes, and the smaller class is the ink, so dark on light and light on dark
+   both work (drawings are mostly background).
+2. Skeleton: ``skimage.morphology.skeletonize`` (Zhang-Suen) of the ink mask.
+3. Strokes: the skeleton as an 8-connected pixel graph; endpoints (one neighbour) and
+   junctions (three or more; adjacent junction pixels are one junction) are its nodes,
+   the pixel chains between them its edges. Spurs shorter than the stroke width are
+   pruned, and junctions joined by an edge shorter than the stroke width merged (a thick
+   "X" skeletonises into two "Y"s). At each junction the branches are paired by the
+   straightest continuation (greedily, most nearly opposite directions first), so an "X"
+   gives two strokes and a "T" one stroke and one branch.
+4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
+   (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
+   replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
+   Hoschek's "intrinsic parametrisation" (The NURBS Book, section 9.4.1). The number of
+   control points grows until the largest distance from the stroke's pixels to the curve
+   is within the tolerance.
+5. Optional refinement: the control points by L-BFGS on the Chamfer distance between the
+   curves' samples and the ink pixels (``nurbskit.losses.chamfer_distance``).
+
+Convention: pixel coordinates, x to the right, y down, the origin at the top-left corner
+of the top-left pixel; the centre of pixel ``[row, col]`` is ``(col + 0.5, row + 0.5)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import InputError, OptionError
+
+# Weight of the control polygon's second differences in the least squares (see fit_stroke).
+_SMOOTH = 1e-2
+# Gaussian smoothing (pixels, along the stroke) of the skeleton's staircase before fitting.
+_STROKE_SIGMA = 1.0
+
+# The 8 neighbours of a pixel, as (drow, dcol).
+_NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
+
+
+@dataclasses.dataclass
+class Strokes:
+    """Strokes traced from a skeleton.
+
+    Attributes:
+        strokes: one ``(n_i, 2)`` array of pixel centres (x, y) per stroke, in order.
+        ink: ``(H, W)`` bool, the ink mask.
+        width: estimated stroke width in pixels.
+        inverted: True when the ink was light on a dark background.
+    """
+
+    strokes: list[np.ndarray]
+    ink: np.ndarray
+    width: float
+    inverted: bool
+
+
+def to_grey(image, source: str = "image") -> np.ndarray:
+    """``(H, W)`` or ``(H, W, 3|4)`` array (any numeric dtype) -> ``(H, W)`` float64 in [0, 1]."""
+    a = np.asarray(image)
+    if a.dtype == bool:
+        a = a.astype(np.float64)
+    if not np.issubdtype(a.dtype, np.number):
+        raise InputError(f"{source}: expected a numeric image array, got dtype {a.dtype}")
+    if a.ndim == 3 and a.shape[-1] in (3, 4):
+        rgb = a[..., :3].astype(np.float64)
+        if a.shape[-1] == 4:  # composite onto white: transparent means background
+            alpha = a[..., 3].astype(np.float64)
+            alpha = alpha / (alpha.max() if alpha.max() > 1 else 1.0)
+            top = 255.0 if np.issubdtype(a.dtype, np.integer) else 1.0
+            rgb = rgb * alpha[..., None] + top * (1 - alpha[..., None])
+        a = rgb @ np.array([0.299, 0.587, 0.114])
+    if a.ndim != 2:
+        raise InputError(f"{source}: expected an (H, W) grey or (H, W, 3|4) colour image, got shape {a.shape}")
+    if a.size == 0:
+        raise InputError(f"{source}: the image is empty (shape {a.shape})")
+    a = a.astype(np.float64)
+    if not np.isfinite(a).all():
+        raise InputError(f"{source}: the image holds non-finite values")
+    if np.issubdtype(np.asarray(image).dtype, np.integer):
+        a = a / float(np.iinfo(np.asarray(image).dtype).max)
+    elif a.max() > 1.0 or a.min() < 0.0:
+        lo, hi = a.min(), a.max()
+        a = (a - lo) / (hi - lo) if hi > lo else np.zeros_like(a)
+    return a
+
+
+def ink_mask(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, bool]:
+    """Otsu's threshold; the smaller class is the ink -> ``(mask (H, W) bool, inverted)``.
+
+    Raises InputError for a blank image (no contrast: nothing to trace).
+    """
+    from skimage.filters import threshold_otsu
+
+    if float(grey.max() - grey.min()) < 1.0 / 64:
+        raise InputError(f"{source}: the image is blank (grey values span {grey.min():.3g}..{grey.max():.3g}), "
+                         "expected dark strokes on a light background or light on dark")
+    t = threshold_otsu(grey)
+    dark = grey <= t
+    inverted = dark.sum() > dark.size / 2  # most pixels dark: light ink on a dark background
+    mask = ~dark if inverted else dark
+    if not mask.any():
+        raise InputError(f"{source}: no ink found after thresholding")
+    return mask, bool(inverted)
+
+
+def _neighbours(skel: np.ndarray, r: int, c: int):
+    h, w = skel.shape
+    for dr, dc in _NEIGHBOURS:
+        rr, cc = r + dr, c + dc
+        if 0 <= rr < h and 0 <= cc < w and skel[rr, cc]:
+            yield rr, cc
+
+
+def _graph(skel: np.ndarray):
+    """Nodes and edges of a skeleton.
+
+    Returns ``node_of`` (dict pixel -> node id), ``nodes`` (list of pixel lists) and
+    ``edges`` (list of ``(a, b, pixels)`` with ``pixels`` from node ``a`` to node ``b``,
+    including one pixel of each node; ``a == b == -1`` for a closed loop with no node).
+    """
+    from scipy import ndimage
+
+    pixels = [tuple(p) for p in np.argwhere(skel)]
+    degree = {p: sum(1 for _ in _neighbours(skel, *p)) for p in pixels}
+    special = np.zeros_like(skel)
+    for p, d in degree.items():
+        if d != 2:
+            special[p] = True
+    labels, n = ndimage.label(special, structure=np.ones((3, 3)))
+    node_of = {p: int(labels[p]) - 1 for p in pixels if labels[p] > 0}
+    nodes = [[] for _ in range(n)]
+    for p, k in node_of.items():
+        nodes[k].append(p)
+    edges, seen = [], set()
+    # Walk from every node pixel into each non-node neighbour until the next node.
+    for start, k in node_of.items():
+        for nb in _neighbours(skel, *start):
+            if nb in node_of or (start, nb) in seen:
+                continue
+            path, prev, cur = [start, nb], start, nb
+            while cur not in node_of:
+                nxt = [q for q in _neighbours(skel, *cur) if q != prev and q not in path[-3:]]
+                if not nxt:
+                    break
+                # Prefer a 4-neighbour step, then any: keeps the chain one pixel wide.
+                nxt.sort(key=lambda q: abs(q[0] - cur[0]) + abs(q[1] - cur[1]))
+                prev, cur = cur, nxt[0]
+                path.append(cur)
+            end = node_of.get(cur, -1)
+            seen.add((start, nb))
+            if len(path) >= 2:
+                seen.add((path[-1], path[-2]))
+            edges.append((k, end, path))
+    # Adjacent node pixels of different nodes do not happen (they are one label), but two
+    # nodes can touch diagonally through no chain pixel: ndimage's 8-connectivity joins them.
+    visited = set(node_of) | {p for _, _, e in edges for p in e}
+    for p in pixels:  # closed loops without any node
+        if p in visited:
+            continue
+        path, prev, cur = [p], None, p
+        while True:
+            visited.add(cur)
+            nxt = [q for q in _neighbours(skel, *cur) if q != prev and q not in visited]
+            if not nxt:
+                break
+            prev, cur = cur, nxt[0]
+            path.append(cur)
+        path.append(p)
+        edges.append((-1, -1, path))
+    return nodes, edges
+
+
+def _direction(pixels: list, reach: int) -> np.ndarray:
+    """Unit direction leaving the first pixel of ``pixels`` along the chain (x, y)."""
+    a = np.array(pixels[0], dtype=float)
+    b = np.array(pixels[min(reach, len(pixels) - 1)], dtype=float)
+    d = (b - a)[::-1]
+    n = np.linalg.norm(d)
+    return d / n if n > 0 else d
+
+
+def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.ndarray], float]:
+    """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width."""
+    from scipy import ndimage
+    from skimage.morphology import skeletonize
+
+    skel = skeletonize(ink)
+    if width is None:
+        dt = ndimage.distance_transform_edt(ink)
+        width = float(2 * np.median(dt[skel])) if skel.any() else 1.0
+    nodes, edges = _graph(skel)
+    short = max(2.0, 1.5 * width)
+
+    def length(path):
+        return float(np.linalg.norm(np.diff(np.array(path, float), axis=0), axis=1).sum())
+
+    # Merge junctions joined by a short edge; prune short spurs (edges to an endpoint).
+    parent = list(range(len(nodes)))
+
+    def find(k):
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    is_junction = [len(nodes[k]) > 1 or sum(1 for _ in _neighbours(skel, *nodes[k][0])) >= 3 for k in range(len(nodes))]
+    kept = []
+    for a, b, path in edges:
+        if a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < max(3.0, 5.0 * width):
+            parent[find(a)] = find(b)
+            continue
+        kept.append((a, b, path))
+    degree = {}
+    for a, b, _ in kept:
+        for k in (a, b):
+            if k >= 0:
+                degree[find(k)] = degree.get(find(k), 0) + 1
+    pruned = []
+    for a, b, path in kept:
+        ra, rb = (find(a) if a >= 0 else -1), (find(b) if b >= 0 else -1)
+        spur = (ra >= 0 and rb >= 0 and ra != rb and min(degree[ra], degree[rb]) == 1
+                and max(degree[ra], degree[rb]) >= 3 and length(path) < short)
+        if not spur:
+            pruned.append((ra, rb, path))
+    edges = pruned
+
+    # Ends of edges at each junction, and their pairing by straightest continuation.
+    reach = int(max(4, 2 * width))
+    at = {}
+    for i, (a, b, path) in enumerate(edges):
+        if a >= 0:
+            at.setdefault(a, []).append((i, 0))
+        if b >= 0:
+            at.setdefault(b, []).append((i, 1))
+    partner = {}
+    for k, ends in at.items():
+        if len(ends) < 2:
+            continue
+        dirs = {}
+        for i, side in ends:
+            path = edges[i][2]
+            dirs[(i, side)] = _direction(path if side == 0 else path[::-1], reach)
+        pairs = []
+        for x in range(len(ends)):
+            for y in range(x + 1, len(ends)):
+                e, f = ends[x], ends[y]
+                if e[0] == f[0]:
+                    continue  # both ends of one edge (a loop back to the junction)
+                pairs.append((float(dirs[e] @ dirs[f]), e, f))  # -1: straight through
+        pairs.sort(key=lambda t: t[0])
+        # Two branches left (a pruned spur, a corner): the stroke passes through, whatever the turn.
+        limit = 1.0 if len(ends) == 2 else -0.5
+        for cos, e, f in pairs:
+            if e in partner or f in partner or cos > limit:  # turning by more than 60 degrees: no
+                continue
+            partner[e], partner[f] = f, e
+
+    # Chain edges into strokes.
+    used, strokes = set(), []
+
+    # Near a junction the skeleton bends towards it (the medial axis of a crossing is not
+    # the two centre lines): through a junction, the last pixels of each branch are left
+    # out and the spline bridges the gap.
+    trim = int(np.ceil(width))
+
+    def walk(i, side):
+        chain = []
+        while i not in used:
+            used.add(i)
+            path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
+            if chain:  # arriving through a junction
+                path = path[min(trim, max(0, len(path) - 2)) + 1:]
+            chain.extend(path)
+            nxt = partner.get((i, 1 - side))
+            if nxt is not None and len(chain) > trim + 2:
+                del chain[len(chain) - trim:]
+            if nxt is None:
+                break
+            i, side = nxt
+        return chain
+
+    starts = [(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner]
+    for i, side in starts:
+        if i not in used:
+            strokes.append(walk(i, side))
+    for i in range(len(edges)):
+        if i not in used:
+            strokes.append(walk(i, 0))
+    out = []
+    for chain in strokes:
+        # Drop consecutive duplicates; (row, col) -> pixel centre (x, y).
+        pts = np.array(chain, dtype=float)[:, ::-1] + 0.5
+        keep = np.ones(len(pts), bool)
+        keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
+        pts = pts[keep]
+        if len(pts) >= 2:
+            out.append(pts)
+    return out, width
+
+
+def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_ctrl: int | None = None,
+               corrections: int = 3):
+    """A clamped B-spline through ordered ``points (N, 2)`` within ``tolerance`` (max distance).
+
+    Least squares on chord-length parameters, then ``corrections`` rounds of parameter
+    correction by projection. The number of control points (``degree + 1`` to
+    ``max_ctrl``, default ``N // 2``) is the smallest whose fit after one correction has
+    every residual within ``tolerance``, found by bisection (the residual at the
+    corrected parameters bounds the distance to the curve from above, and falls as
+    control points are added). Returns ``(curve, max_distance)``, the distance by
+    projection.
+    """
+    import torch
+
+    from ..core import NURBSCurve
+    from ..core.basis import basis_matrix
+    from ..core.knots import clamped_uniform
+    from ..core.project import project_points_curve
+
+    pts = torch.as_tensor(np.asarray(points, dtype=np.float64))
+    n_pts = len(pts)
+    closed = n_pts > 3 and bool(torch.linalg.norm(pts[0] - pts[-1]) < 1e-9)
+    seg = torch.linalg.norm(pts[1:] - pts[:-1], dim=1)
+    u_chord = torch.cat([pts.new_zeros(1), torch.cumsum(seg, 0)])
+    u_chord = u_chord / u_chord[-1]
+    length = float(seg.sum())
+    if max_ctrl is None:  # at most one span per 3 px of stroke and 4 points per control point
+        max_ctrl = min(n_pts // 4, int(length / 3) + degree)
+    max_ctrl = max(degree + 1, min(max_ctrl, n_pts))
+
+    def solve(n_ctrl, u):
+        knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
+        B = basis_matrix(knots, degree, n_ctrl, u)
+        # A faint second-difference penalty on the control polygon keeps spans with few
+        # or no points well posed (no wild control points), and changes nothing else.
+        D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0) * _SMOOTH
+        A = torch.cat([B, D])
+        rhs = torch.cat([pts, pts.new_zeros(len(D), 2)])
+        cp = torch.linalg.lstsq(A, rhs).solution.contiguous()
+        if closed:
+            cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
+        return NURBSCurve(cp, degree=degree), B @ cp
+
+    def corrected(curve, u):
+        # Foot-point parameters, kept in order: a foot point behind its predecessor would fold the fit.
+        # Warm start at the current parameters (no grid search): the correction follows the
+        # stroke's order, and each Newton start is already near its foot point.
+        t = project_points_curve(curve, pts, params=u, iterations=8).params.detach().clamp(0, 1)
+        t = torch.cummax(t, 0).values
+        return torch.cat([t.new_zeros(1), t[1:-1], t.new_ones(1)])
+
+    def fit(n_ctrl, rounds):
+        u = u_chord
+        curve, at_u = solve(n_ctrl, u)
+        for _ in range(rounds):
+            u = corrected(curve, u)
+            curve, at_u = solve(n_ctrl, u)
+        return curve, float(torch.linalg.norm(at_u - pts, dim=1).max())
+
+    lo, hi = degree + 1, max_ctrl
+    if fit(lo, 1)[1] <= tolerance:
+        hi = lo
+    while lo < hi:  # the smallest n with a bound within tolerance (hi always fits or is the cap)
+        mid = (lo + hi) // 2
+        if fit(mid, 1)[1] <= tolerance:
+            hi = mid
+        else:
+            lo = mid + 1
+    curve, _ = fit(hi, corrections)
+    distance = float(project_points_curve(curve, pts).distance.max())
+    return curve, distance
+
+
+def _ink_points(ink: np.ndarray) -> np.ndarray:
+    rows, cols = np.nonzero(ink)
+    return np.stack([cols + 0.5, rows + 0.5], axis=1).astype(np.float64)
+
+
+def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float = 0.5) -> list:
+    """Control points of every curve moved by L-BFGS to lower the Chamfer distance to the ink.
+
+    The loss is ``nurbskit.losses.chamfer_distance`` between all curves' samples (about
+    ``spacing`` px apart) and the ink pixels' centres; knots and degree stay.
+    """
+    import torch
+
+    from ..core import NURBSCurve
+    from ..losses import chamfer_distance
+
+    if not curves:
+        return curves
+    target = torch.as_tensor(_ink_points(ink))
+    params = [c.control_points.detach().contiguous().clone().requires_grad_(True) for c in curves]
+    counts = []
+    for c in curves:
+        cp = c.control_points.detach().numpy()
+        counts.append(int(np.clip(np.linalg.norm(np.diff(cp, axis=0), axis=1).sum() / spacing, 16, 4096)))
+    us = [torch.linspace(0, 1, m, dtype=torch.float64) for m in counts]
+    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        samples = torch.cat([NURBSCurve(p, degree=c.degree, knot_vector=c.knot_vector, validate=False).evaluate(u)
+                             for p, c, u in zip(params, curves, us)])
+        loss = chamfer_distance(samples, target)
+        loss.backward()
+        return loss
+
+    opt.step(closure)
+    return [NURBSCurve(p.detach(), degree=c.degree, knot_vector=c.knot_vector) for p, c in zip(params, curves)]
+
+
+def chamfer_to_ink(curves: list, ink: np.ndarray, spacing: float = 0.25) -> dict:
+    """Mean distances in pixels between the curves and the ink pixel centres, both ways.
+
+    Returns ``{"curves_to_ink", "ink_to_curves", "symmetric"}`` (symmetric: their mean);
+    not squared, unlike the training loss, so the numbers read in pixels.
+    """
+    from .synthetic import dense_samples
+
+    samples = np.concatenate([dense_samples(c, spacing) for c in curves]) if curves else np.zeros((0, 2))
+    return chamfer_points(samples, _ink_points(ink))
+
+
+def chamfer_points(a: np.ndarray, b: np.ndarray) -> dict:
+    """Mean nearest distances ``a -> b`` and ``b -> a`` (cKDTree) and their mean, in the points' units."""
+    if len(a) == 0 or len(b) == 0:
+        return {"curves_to_ink": float("inf"), "ink_to_curves": float("inf"), "symmetric": float("inf")}
+    ab = float(cKDTree(b).query(a)[0].mean())
+    ba = float(cKDTree(a).query(b)[0].mean())
+    return {"curves_to_ink": ab, "ink_to_curves": ba, "symmetric": (ab + ba) / 2}
+
+
+def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source: str = "image",
+              min_length: float | None = None):
+    """Curves in a drawing by the classical path -> ``(curves, Strokes)``.
+
+    Args:
+        image: ``(H, W)`` grey or ``(H, W, 3|4)`` colour array.
+        tolerance: largest distance in pixels from a stroke's skeleton pixels to its curve.
+        refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
+        min_length: strokes shorter than this (pixels) are dropped as noise (default:
+            the stroke width).
+    """
+    if not tolerance > 0:
+        raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
+    grey = to_grey(image, source)
+    ink, inverted = ink_mask(grey, source)
+    strokes, width = trace_strokes(ink)
+    min_length = width if min_length is None else min_length
+    curves = []
+    for s in strokes:
+        if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
+            continue
+        if len(s) < 4:  # too few points for a cubic: resample the short segment
+            t = np.linspace(0, 1, 4)
+            s = np.stack([np.interp(t, np.linspace(0, 1, len(s)), s[:, k]) for k in range(2)], axis=1)
+        if len(s) > 4:  # the skeleton's pixel staircase is noise of +-0.5 px: smooth it along the stroke
+            from scipy.ndimage import gaussian_filter1d
+
+            closed = bool(np.all(s[0] == s[-1]))
+            s = gaussian_filter1d(s, _STROKE_SIGMA, axis=0, mode="wrap" if closed else "nearest")
+            if closed:
+                s[-1] = s[0]
+        if s[0, 0] > s[-1, 0]:  # canonical orientation (as the synthetic targets): first point left of the last
+            s = s[::-1].copy()
+        curve, _ = fit_stroke(s, tolerance)
+        curves.append(curve)
+    if refine_iterations:
+        curves = refine(curves, ink, refine_iterations)
+    return curves, Strokes(strokes=strokes, ink=ink, width=width, inverted=inverted)

@@ -1,0 +1,160 @@
+"""Synthetic curve drawings and the classical curve path (issue 10)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import nurbskit
+from nurbskit.curves.classic import chamfer_points, chamfer_to_ink, fit_image, fit_stroke, ink_mask, to_grey
+from nurbskit.curves.synthetic import SyntheticConfig, curve_of, dense_samples, make_sample, render
+from nurbskit.errors import InputError, OptionError
+
+from _assert import assert_close
+
+# A smooth, non-self-intersecting cubic in a 128 x 128 image.
+KNOWN = np.array([[14.0, 100.0], [40.0, 20.0], [80.0, 30.0], [112.0, 96.0]])
+
+
+def _draw(polygons, size=(128, 128), width=2.0):
+    return 1.0 - render([dense_samples(curve_of(p)) for p in polygons], size, width)
+
+
+def _symmetric(curves, truths):
+    got = np.concatenate([dense_samples(c) for c in curves])
+    want = np.concatenate([dense_samples(curve_of(p)) for p in truths])
+    return chamfer_points(got, want)["symmetric"]
+
+
+def test_synthetic_is_deterministic_and_follows_the_recipe():
+    config = SyntheticConfig()
+    a, b = make_sample(11, config), make_sample(11, config)
+    assert np.array_equal(a.image, b.image)
+    assert all(np.array_equal(p, q) for p, q in zip(a.control_points, b.control_points))
+    assert not np.array_equal(a.image, make_sample(12, config).image)
+    counts = set()
+    for seed in range(30):
+        s = make_sample(seed, config)
+        assert s.image.shape == (128, 128) and 0.0 <= s.image.min() and s.image.max() <= 1.0
+        assert 1 <= s.n_curves <= 3 and list(s.counts) == [len(p) for p in s.control_points]
+        for p in s.control_points:
+            assert 4 <= len(p) <= 6
+            assert p[0, 0] <= p[-1, 0]  # canonical orientation
+            assert (p >= 4).all() and (p[:, 0] <= 124).all() and (p[:, 1] <= 124).all()
+        counts.add(s.n_curves)
+    assert counts == {1, 2, 3}
+
+
+def test_synthetic_curves_render_where_their_control_points_say():
+    config = SyntheticConfig(size=(96, 64), width=2.0)
+    s = make_sample(3, config)
+    assert s.image.shape == (96, 64)
+    curve_pts = np.concatenate([dense_samples(c) for c in s.curves()])
+    cols = np.clip(curve_pts[:, 0].astype(int), 0, 63)
+    rows = np.clip(curve_pts[:, 1].astype(int), 0, 95)
+    # Every pixel the curve passes through lies within 0.71 px of it: ink >= 1 - 0.21.
+    assert s.image[rows, cols].max() <= 0.25
+    # Pixels farther than width/2 + 1/2 from every curve point are untouched background.
+    from scipy.spatial import cKDTree
+
+    ys, xs = np.mgrid[0:96, 0:64]
+    d = cKDTree(curve_pts).query(np.stack([xs.ravel() + 0.5, ys.ravel() + 0.5], 1))[0].reshape(96, 64)
+    assert (s.image[d > 1.5 + 0.01] == 1.0).all()
+    assert (s.image[d < 0.5] == 0.0).all()
+
+
+def test_synthetic_config_rejects_bad_values():
+    with pytest.raises(OptionError, match="ctrl"):
+        SyntheticConfig(ctrl=(2, 3))
+    with pytest.raises(OptionError, match="width"):
+        SyntheticConfig(width=0)
+
+
+def test_fit_stroke_recovers_an_exact_cubic():
+    truth = curve_of(KNOWN)
+    pts = dense_samples(truth, spacing=1.0)
+    curve, err = fit_stroke(pts, tolerance=0.01)
+    assert err <= 0.01
+    import torch
+
+    from nurbskit.core.project import project_points_curve
+
+    back = project_points_curve(curve, torch.as_tensor(dense_samples(truth, spacing=0.1))).distance
+    assert float(back.max()) < 0.02  # the whole true curve lies on the fit, not only the samples
+
+
+def test_classic_recovers_a_drawn_spline():
+    image = _draw([KNOWN])
+    curves = nurbskit.curves_from_image(image)
+    assert len(curves) == 1
+    assert _symmetric(curves, [KNOWN]) < 1.0
+    assert curves[0].control_points[0, 0] < curves[0].control_points[-1, 0]  # canonical orientation
+
+
+def test_classic_splits_an_x_into_two_strokes():
+    a = np.array([[10.0, 10.0], [40.0, 40.0], [80.0, 80.0], [110.0, 110.0]])
+    b = np.array([[10.0, 110.0], [40.0, 80.0], [80.0, 40.0], [110.0, 10.0]])
+    curves = nurbskit.curves_from_image(_draw([a, b], width=3.0))
+    assert len(curves) == 2
+    assert _symmetric(curves, [a, b]) < 1.0
+    for c in curves:  # each stroke runs corner to corner, not around the crossing
+        ends = c.control_points[[0, -1]].numpy()
+        assert np.linalg.norm(ends[0] - ends[1]) > 120
+
+
+def test_classic_light_on_dark_matches_dark_on_light():
+    image = _draw([KNOWN])
+    mask, inverted = ink_mask(1.0 - image)
+    assert inverted
+    other = ink_mask(image)[0]
+    assert (mask != other).sum() <= 0.02 * other.sum()  # only pixels at the threshold itself may differ
+    curves = nurbskit.curves_from_image((255 * (1.0 - image)).astype(np.uint8))
+    assert len(curves) == 1 and _symmetric(curves, [KNOWN]) < 1.0
+
+
+def test_blank_images_are_a_one_line_error():
+    for blank in (np.ones((32, 32)), np.zeros((32, 32), np.uint8)):
+        with pytest.raises(InputError, match="blank") as info:
+            nurbskit.curves_from_image(blank)
+        assert "\n" not in str(info.value)
+    with pytest.raises(InputError, match="empty"):
+        to_grey(np.zeros((0, 5)))
+    with pytest.raises(OptionError, match="not shipped"):
+        nurbskit.curves_from_image(_draw([KNOWN]), method="network")
+
+
+def test_refinement_does_not_move_away_from_the_ink():
+    image = _draw([KNOWN], width=3.0)
+    before, strokes = fit_image(image, tolerance=3.0)
+    after, _ = fit_image(image, tolerance=3.0, refine_iterations=10)
+    sq = lambda cs: chamfer_to_ink(cs, strokes.ink)["symmetric"]  # noqa: E731
+    assert sq(after) <= sq(before) + 1e-9
+    assert _symmetric(after, [KNOWN]) < 1.0
+
+
+def test_to_grey_scales_integer_and_colour_images():
+    rgb = np.zeros((2, 2, 3), np.uint8)
+    rgb[0, 0] = 255
+    assert_close(to_grey(rgb), np.array([[1.0, 0.0], [0.0, 0.0]]), atol=1e-12)
+    rgba = np.zeros((1, 2, 4), np.uint8)
+    rgba[0, 1, 3] = 255  # opaque black beside a transparent pixel (white)
+    assert_close(to_grey(rgba), np.array([[1.0, 0.0]]), atol=1e-12)
+
+
+def test_curves_doctests():
+    import doctest
+
+    from nurbskit.curves import api, classic, synthetic
+
+    for module in (api, classic, synthetic):
+        assert doctest.testmod(module, raise_on_error=False).failed == 0
+
+
+def test_a_t_junction_gives_a_bar_and_a_stem():
+    bar = np.array([[10.0, 30.0], [40.0, 30.0], [80.0, 30.0], [118.0, 30.0]])
+    stem = np.array([[64.0, 30.0], [64.0, 60.0], [64.0, 90.0], [64.0, 118.0]])
+    curves = nurbskit.curves_from_image(_draw([bar, stem], width=3.0))
+    assert len(curves) == 2
+    lengths = sorted(np.linalg.norm(np.diff(dense_samples(c), axis=0), axis=1).sum() for c in curves)
+    assert lengths[1] > 100  # the bar is one stroke, not split at the stem
+    assert _symmetric(curves, [bar, stem]) < 1.0

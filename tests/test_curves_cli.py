@@ -1,0 +1,105 @@
+"""``nurbskit curves`` end to end, and its one-line errors."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from nurbskit.cli import main
+from nurbskit.core.serialize import from_dict
+from nurbskit.curves.classic import chamfer_points
+from nurbskit.curves.synthetic import curve_of, dense_samples, render
+
+KNOWN = np.array([[14.0, 100.0], [40.0, 20.0], [80.0, 30.0], [112.0, 96.0]])
+
+
+def _write(path, grey):
+    Image.fromarray(np.round(255 * grey).astype(np.uint8), mode="L").save(path)
+    return path
+
+
+def test_curves_end_to_end(tmp_path, capsys):
+    ink = render([dense_samples(curve_of(KNOWN))], (128, 160), 2.0)
+    src = _write(tmp_path / "drawing.png", 1.0 - ink)
+    out = tmp_path / "out"
+    assert main(["curves", str(src), "--out", str(out)]) == 0
+    assert "1 curve(s)" in capsys.readouterr().out
+    data = json.loads((out / "curves.json").read_text())
+    assert "top-left" in data["coordinates"] and data["size"] == [160, 128]
+    [curve] = [from_dict(d) for d in data["curves"]]
+    got = chamfer_points(dense_samples(curve), dense_samples(curve_of(KNOWN)))
+    assert got["symmetric"] < 1.0
+    report = json.loads((out / "report.json").read_text())
+    assert report["curves"] == 1 and report["polarity"] == "dark on light"
+    assert 0 < report["chamfer_px"]["curves_to_ink"] < 1.0 and 0 < report["chamfer_px"]["ink_to_curves"] < 1.5
+    svg = ET.parse(out / "curves.svg").getroot()
+    paths = [e for e in svg.iter() if e.tag.endswith("path")]
+    assert len(paths) == 1 and paths[0].get("d").startswith("M ")
+    start = [float(v) for v in paths[0].get("d").split()[1:3]]
+    assert np.linalg.norm(np.array(start) - curve.control_points[0].numpy()) < 1e-3
+    with Image.open(out / "overlay.png") as im:
+        assert im.size == (640, 512)  # scaled up 4x to at least 512 px
+    # An existing output is kept without --overwrite, replaced with it.
+    assert main(["curves", str(src), "--out", str(out)]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main(["curves", str(src), "--out", str(out), "--overwrite", "--refine", "--refine-iters", "5"]) == 0
+    assert json.loads((out / "report.json").read_text())["refined"] is True
+
+
+def test_curves_light_on_dark(tmp_path, capsys):
+    ink = render([dense_samples(curve_of(KNOWN))], (128, 128), 3.0)
+    src = _write(tmp_path / "chalk.png", ink)
+    assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 0
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["polarity"] == "light on dark" and report["curves"] == 1
+
+
+@pytest.mark.parametrize("kind, expected", [
+    ("missing", "no such file"),
+    ("empty", "the file is empty"),
+    ("text", "not a readable image"),
+    ("blank", "blank"),
+])
+def test_curves_bad_images_are_one_line_errors(tmp_path, capsys, kind, expected):
+    path = tmp_path / "in.png"
+    if kind == "empty":
+        path.write_bytes(b"")
+    elif kind == "text":
+        path.write_text("not an image\n")
+    elif kind == "blank":
+        _write(path, np.ones((32, 32)))
+    assert main(["curves", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert expected in err and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_curves_network_method_is_not_shipped(tmp_path, capsys):
+    src = _write(tmp_path / "d.png", 1.0 - render([dense_samples(curve_of(KNOWN))], (128, 128), 2.0))
+    assert main(["curves", str(src), "--out", str(tmp_path / "o"), "--method", "network"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not shipped" in err and "\n" not in err
+
+
+def test_curves_decompression_bomb_is_refused(tmp_path, capsys, monkeypatch):
+    from PIL import Image as PILImage
+
+    src = _write(tmp_path / "big.png", np.ones((64, 64)))
+    monkeypatch.setattr(PILImage, "MAX_IMAGE_PIXELS", 1000)  # 4096 pixels > 2 x 1000: a bomb
+    assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 2
+    assert "too large" in capsys.readouterr().err
+
+
+def test_curves_a_dot_gives_no_curve_and_valid_json(tmp_path, capsys):
+    grey = np.ones((64, 64))
+    grey[30:33, 30:33] = 0.0
+    src = _write(tmp_path / "dot.png", grey)
+    assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 0
+    assert "0 curves" in capsys.readouterr().out
+    report = json.loads((tmp_path / "o" / "report.json").read_text())  # strict JSON: no Infinity
+    assert report["curves"] == 0 and report["chamfer_px"]["symmetric"] is None
+    assert json.loads((tmp_path / "o" / "curves.json").read_text())["curves"] == []
