@@ -407,6 +407,21 @@ def test_volume_csv_rows_run_through_volume(client, tmp_path):
     assert (tmp_path / "out" / "shape0" / "mesh.obj").is_file()
 
 
+def test_curves_and_patches_run_through_the_registry(client, tmp_path):
+    from PIL import Image
+
+    for k in range(2):
+        img = np.full((48, 48), 255, np.uint8)
+        img[20 + k : 23 + k, 4:44] = 0  # one horizontal stroke
+        Image.fromarray(img).save(tmp_path / f"stroke{k}.png")
+    records = nurbskit.batch.run("curves", [tmp_path], tmp_path / "out", client=client)
+    assert sorted(r["status"] for r in records) == ["ok", "ok"], records
+    first = next(r for r in records if r["name"].startswith("stroke0"))
+    report = json.loads((tmp_path / "out" / first["name"] / "report.json").read_text())
+    assert first["metrics"] == {"curves": 1.0, "chamfer_px": report["chamfer_px"]["symmetric"]}
+    assert set(nurbskit.batch.COMMANDS) >= {"fit", "volume", "patches", "shape", "curves"}
+
+
 # --- no cluster needed -------------------------------------------------------------------------
 
 def test_import_does_not_load_dask():

@@ -108,6 +108,19 @@ def patches_metrics(report: dict) -> dict:
             "p_cov_in": _number(m.get("P_cov_i")), "p_cov_out": _number(m.get("P_cov_o"))}
 
 
+def shape_metrics(report: dict) -> dict:
+    """``nurbskit shape``'s headline: the input-to-surface distance (the kind chosen is in each report)."""
+    m = report.get("metrics", {})
+    return {"to_surface_mean": _number(m.get("to_surface_mean")),
+            "to_surface_p95": _number(m.get("to_surface_p95"))}
+
+
+def curves_metrics(report: dict) -> dict:
+    """``nurbskit curves``'s headline: curves found and the symmetric Chamfer to the ink (pixels)."""
+    return {"curves": _number(report.get("curves")),
+            "chamfer_px": _number((report.get("chamfer_px") or {}).get("symmetric"))}
+
+
 VIEWS = ("front", "left", "top")
 
 
@@ -185,4 +198,12 @@ register(BatchCommand(
 register(BatchCommand(
     name="patches", module="nurbskit.cli.patches_command", extensions=FIT_EXTENSIONS, metrics=patches_metrics,
     description="fit a few trimmed NURBS patches to each scan",
+))
+register(BatchCommand(
+    name="shape", module="nurbskit.cli.shape_command", extensions=FIT_EXTENSIONS, metrics=shape_metrics,
+    description="fit an exact surface of revolution or extrusion (or free-form) to each cloud",
+))
+register(BatchCommand(
+    name="curves", module="nurbskit.cli.curves_command", extensions=(".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"),
+    metrics=curves_metrics, description="fit B-spline curves to each drawing",
 ))
