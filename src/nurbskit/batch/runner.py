@@ -123,7 +123,7 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         # the items are independent: nothing to steal or rebalance between workers
         "distributed.scheduler.work-stealing": False,
     }
-    with dask.config.set(config):
+    with dask.config.set(config), _workers_ignore_ctrl_c():
         cluster = distributed.LocalCluster(
             n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
             dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
@@ -134,6 +134,29 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
             yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
     finally:
         cluster.close()
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c():
+    """Start worker processes with SIGINT ignored; this process keeps its own handler.
+
+    Ctrl-C in a terminal reaches the whole process group. The workers must not each die
+    with a KeyboardInterrupt traceback on the user's terminal: this process handles the
+    interrupt and closes the cluster (and with it the workers). An ignored signal is the
+    one disposition a spawned process inherits, and Python then installs no handler of
+    its own. A Ctrl-C during the cluster's start-up takes effect once it has started.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def dashboard_link(client, local: bool) -> str | None:
