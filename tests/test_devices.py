@@ -20,6 +20,43 @@ DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 DTYPES = [torch.float32, torch.float64]
 
 
+# Absolute tolerance of each dtype against a float64 CPU reference of O(1) values.
+AGAINST_F64 = {torch.float32: 2e-5, torch.float64: 1e-12}
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_core_losses_and_projection_on_every_device_and_dtype(device, dtype):
+    """Evaluation, derivatives, sampling, Chamfer and projection agree with float64 on the CPU."""
+    from _assert import assert_close
+
+    from nurbskit import NURBSSurface
+    from nurbskit.core.project import project_points
+    from nurbskit.losses import chamfer_distance
+
+    g = torch.Generator().manual_seed(5)
+    cp = torch.rand(7, 6, 3, generator=g, dtype=torch.float64)
+    w = 0.5 + torch.rand(7, 6, generator=g, dtype=torch.float64)
+    ref = NURBSSurface(cp, (3, 2), weights=w)
+    here = NURBSSurface(cp.to(device, dtype), (3, 2), weights=w.to(device, dtype))
+    uv = torch.rand(200, 2, generator=g, dtype=torch.float64)
+    tol = AGAINST_F64[dtype]
+    out = here.evaluate(uv.to(device, dtype))
+    assert out.dtype == dtype and out.device.type == device
+    assert_close(out.cpu(), ref.evaluate(uv).to(dtype), atol=tol)
+    assert_close(here.derivatives(uv.to(device, dtype), order=1).cpu(), ref.derivatives(uv, order=1).to(dtype),
+                 atol=50 * tol)
+    assert_close(here.sample((16, 12)).cpu(), ref.sample((16, 12)).to(dtype), atol=tol)
+    x = ref.evaluate(uv) + 0.01 * torch.randn(200, 3, generator=g, dtype=torch.float64)
+    y = ref.sample((20, 20)).reshape(-1, 3)
+    c = chamfer_distance(x.to(device, dtype), y.to(device, dtype))
+    assert c.device.type == device and c.dtype == dtype
+    assert_close(c.cpu(), chamfer_distance(x, y).to(dtype), atol=tol)
+    proj = project_points(here, x.to(device, dtype))
+    assert proj.distance.device.type == device and proj.distance.dtype == dtype
+    assert_close(proj.distance.cpu(), project_points(ref, x).distance.to(dtype), atol=10 * tol)
+
+
 def test_the_fit_configuration_holds_no_device_or_dtype():
     names = {f.name for f in dataclasses.fields(FitConfig)}
     assert "device" not in names and "dtype" not in names
