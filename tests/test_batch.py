@@ -571,3 +571,15 @@ def test_resume_trusts_only_a_matching_marker(tmp_path):
     path = Path(items["good"].paths[0])
     os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))  # the input changed
     assert runner.completed(PROBE, items["good"], out, ["--scale", "2"]) is None
+
+
+def test_summary_figure_with_values_equal_up_to_rounding(tmp_path):
+    # Two inputs whose metrics differ by one unit in the last place: numpy cannot make 5
+    # bins of that range (found by CI on two identical drawings); one bar is drawn.
+    from nurbskit.batch.summary import plot_summary
+
+    v = 0.4900257753980464
+    records = [{"name": n, "status": "ok", "seconds": 1.0, "metrics": {"chamfer_px": x, "curves": 1.0}}
+               for n, x in (("a", v), ("b", float(np.nextafter(v, 1.0))))]
+    path = plot_summary(records, tmp_path / "summary.png")
+    assert path.is_file() and path.stat().st_size > 1000

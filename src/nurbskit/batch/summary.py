@@ -102,7 +102,12 @@ def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = 
                   for r in ok]
         values = [v for v in values if math.isfinite(v)]
         if values:
-            ax.hist(values, bins=min(30, max(5, len(values) // 2)), color="tab:blue", edgecolor="white")
+            lo, hi = min(values), max(values)
+            # values equal up to rounding cannot be split into bins: one bar around them
+            width = max(abs(lo), abs(hi), 1e-300) * 1e-6
+            span = (lo - width, hi + width) if hi - lo <= width else None
+            bins = 1 if span else min(30, max(5, len(values) // 2))
+            ax.hist(values, bins=bins, range=span, color="tab:blue", edgecolor="white")
         else:
             ax.text(0.5, 0.5, "no values", ha="center", va="center", transform=ax.transAxes)
         ax.set_xlabel(name)
