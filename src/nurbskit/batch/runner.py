@@ -9,8 +9,8 @@ Convention (cluster):
     so processes, not threads, are how items run side by side), each restarted by its
     nanny when it passes 95 % of ``memory_limit``. The scheduler retries an item whose
     worker died ``retries`` times (``distributed.scheduler.allowed-failures``) and sends
-    a worker no more items than it has threads (``worker-saturation`` 1.0), so a dying
-    worker takes down only the item it was running. The cluster and every process it
+    no more items than there are worker threads (:func:`window_size`), so a dying worker
+    takes down only the item it was running. The cluster and every process it
     started are closed when :func:`run` returns or raises (Ctrl-C included).
 
     With ``scheduler="tcp://host:port"`` (or a ``client``), the existing cluster is
@@ -328,19 +328,21 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
 
 
 def window_size(client) -> int:
-    """How many items may wait on the scheduler at once: 4 per worker thread, at least 32.
+    """How many items may be on the scheduler at once: one per worker thread.
 
-    The rest wait in this process, as :class:`Item` objects of a few hundred bytes:
-    a scheduler holds about 3.7 kB per queued task (measured, ``benchmarks/bench_batch.py``),
-    so a window keeps its memory flat however many inputs there are (68 MB with 10,000
-    queued, as empty), and every worker still has its next item waiting on the scheduler
-    when it finishes one.
+    The rest wait in this process, as :class:`Item` objects of a few hundred bytes, so the
+    scheduler's memory stays flat however many inputs there are (68 MB with 10,000
+    queued, as empty; ``benchmarks/bench_batch.py``). One per thread, not more: a task
+    the scheduler has already handed to a worker dies with that worker, so a worker that
+    crashes (memory limit, a fault) must hold nothing but the item that killed it. The
+    price is one scheduler round trip between items, milliseconds against fits of
+    seconds.
     """
     try:
         threads = sum(client.nthreads().values())
     except Exception:  # noqa: BLE001 - a window size, never a reason to fail
         threads = 0
-    return max(32, 4 * threads)
+    return max(1, threads)
 
 
 def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
