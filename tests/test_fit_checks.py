@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 
+from _cli import one_line, run
 from nurbskit.cli import main
 from nurbskit.core import NURBSSurface
 from nurbskit.errors import InputError, OptionError
@@ -35,17 +36,6 @@ def cloud(tmp_path):
     path = tmp_path / "cloud.npy"
     np.save(path, patch_points(500).numpy())
     return path
-
-
-def run(argv) -> int:
-    try:
-        return main(argv)
-    except SystemExit as exc:
-        return exc.code
-
-
-def one_line(err: str) -> bool:
-    return "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_more_control_points_than_points_is_refused_with_what_fits(cloud, tmp_path, capsys):

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from _cli import run
 from nurbskit.cli import main
 from nurbskit.core import NURBSSurface, save
 
@@ -17,7 +18,6 @@ from conftest import shared_file
 F64 = torch.float64
 ALL = {"surface.json", "points.off", "control_points.off", "report.json", "config.json",
        "wireframe.png", "clouds.png", "error_map.png", "loss.png", ".nurbskit-manifest.json"}
-
 
 
 @pytest.fixture
@@ -58,14 +58,6 @@ def test_fit_named_pipeline_without_figures_and_overwrite(cloud, tmp_path, capsy
     assert main(args) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert main(args + ["--overwrite"]) == 0
-
-
-def run(argv) -> int:
-    """main's exit code, whether argparse (SystemExit) or the command refused the input."""
-    try:
-        return main(argv)
-    except SystemExit as exc:
-        return exc.code
 
 
 @pytest.mark.parametrize(

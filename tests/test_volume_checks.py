@@ -13,6 +13,7 @@ import pytest
 import torch
 from PIL import Image
 
+from _cli import one_line, run
 from nurbskit.cli import main
 from nurbskit.errors import InputError
 from nurbskit.volume import VolumeFitConfig, fit_silhouettes, get_preset
@@ -38,17 +39,6 @@ def drawings(tmp_path):
 def args(drawings, out, *extra):
     return ["volume", "--front", drawings["front"], "--left", drawings["left"], "--top", drawings["top"],
             "--out", str(out), *extra]
-
-
-def run(argv) -> int:
-    try:
-        return main(argv)
-    except SystemExit as exc:
-        return exc.code
-
-
-def one_line(err: str) -> bool:
-    return "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.slow

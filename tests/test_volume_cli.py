@@ -8,6 +8,7 @@ import torch
 import trimesh
 from PIL import Image
 
+from _cli import run
 from nurbskit import load
 from nurbskit.cli import main
 from nurbskit.volume.shapes import solid_drawings, sphere_and_box
@@ -77,14 +78,6 @@ def test_empty_result_is_reported_not_hidden(tmp_path, drawings, capsys):
     assert rc == 1
     assert "no surface at isovalue 0.5" in capsys.readouterr().err
     assert json.loads((out / "report.json").read_text())["empty"] is True
-
-
-def run(argv) -> int:
-    """main's exit code, whether argparse (SystemExit) or the command refused the options."""
-    try:
-        return main(argv)
-    except SystemExit as exc:
-        return exc.code
 
 
 @pytest.mark.parametrize(
