@@ -82,14 +82,19 @@ def _write_step(shape, path: Path) -> None:
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to STEP ({status})")
     model = writer.Model()
-    out = StepData_StepWriter(model)
     # 17 significant digits (see the module docstring); '%E' keeps the decimal point STEP needs
+    _print_model(StepData_StepWriter(model), model.Protocol(), "%.17f", path, "STEP")
+
+
+def _print_model(out, protocol, mid_range_format: str, path: Path, what: str) -> None:
+    """Send ``protocol``'s model to OCC's text writer ``out`` with 17 significant digits
+    (OCC's default keeps 12 in STEP, 9 in IGES) and write the text to ``path``."""
     out.FloatWriter().SetFormat("%.16E")
-    out.FloatWriter().SetFormatForRange("%.17f", 0.1, 1000.0)
-    out.SendModel(model.Protocol())
+    out.FloatWriter().SetFormatForRange(mid_range_format, 0.1, 1000.0)
+    out.SendModel(protocol)
     buffer = io.BytesIO()
     if not out.Print(buffer):
-        raise NurbskitError(f"{path}: OpenCASCADE could not write the STEP text")
+        raise NurbskitError(f"{path}: OpenCASCADE could not write the {what} text")
     path.write_bytes(buffer.getvalue())
 
 
@@ -102,16 +107,8 @@ def _write_iges(shape, path: Path) -> None:
     if not writer.AddShape(shape):
         raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to IGES")
     writer.ComputeModel()
-    model = writer.Model()
-    out = IGESData_IGESWriter(model)
     # 17 significant digits instead of OCC's 9 ('%11.9E'); see the module docstring
-    out.FloatWriter().SetFormat("%.16E")
-    out.FloatWriter().SetFormatForRange("%.16E", 0.1, 1000.0)
-    out.SendModel(IGESSolid.Protocol_s())
-    buffer = io.BytesIO()
-    if not out.Print(buffer):
-        raise NurbskitError(f"{path}: OpenCASCADE could not write the IGES text")
-    path.write_bytes(buffer.getvalue())
+    _print_model(IGESData_IGESWriter(writer.Model()), IGESSolid.Protocol_s(), "%.16E", path, "IGES")
 
 
 def _write_brep(shape, path: Path) -> None:
