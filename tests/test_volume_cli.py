@@ -113,3 +113,13 @@ def test_bad_drawings_give_one_line(tmp_path, drawings, capsys, content, message
     err = capsys.readouterr().err
     assert rc == 2 and message in err and "left drawing" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_format_writes_the_mesh_in_another_format(tmp_path, drawings):
+    out = tmp_path / "fit"
+    rc = main(args(drawings, out, "--control-size", "6", "--grid", "10", "--iters", "3", "--quiet", "--format", "stl"))
+    assert rc in (0, 1)
+    obj = trimesh.load(out / "mesh.obj", process=False, force="mesh")
+    stl = trimesh.load(out / "mesh.stl", force="mesh")  # a second reader of the same surface
+    assert len(stl.faces) == len(obj.faces) > 0
+    assert abs(stl.area - obj.area) <= 1e-6 * obj.area

@@ -58,6 +58,13 @@ def add_format_option(parser) -> None:
                              "(default 1e-3 of the bounding-box diagonal)")
 
 
+def write_requested_format(args, obj, folder, stem: str) -> None:
+    """With ``--format F`` (see :func:`add_format_option`), write ``obj`` as ``folder/stem.F``."""
+    if args.export_format:
+        write_result(obj, Path(folder) / f"{stem}.{args.export_format}", format=args.export_format,
+                     tolerance=args.export_tolerance)
+
+
 def write_result(obj, path, format: str | None = None, tolerance: float | None = None, **kwargs) -> dict:
     """Write a result in any format (see :func:`nurbskit.io.cad.write_result`)."""
     from ..io.cad import write_result as _write

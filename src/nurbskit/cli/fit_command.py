@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import InputError, OptionError
 from ..fit.config import CLOSED, INIT_KINDS, LAPLACIAN_ON, LR_RANGE, MAX_ITERS, FitConfig, InitConfig, LossWeights
 from ._options import add_device_options, device_and_dtype, int_in, number_in
+from .export_command import add_format_option, write_requested_format
 
 
 def _help(cls, name: str) -> str:
@@ -75,8 +76,6 @@ def register(subparsers) -> None:
                    help="torch CPU threads (default: torch's choice); 1 is often fastest for small clouds on a busy machine")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
-    from .export_command import add_format_option
-
     add_format_option(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (faster)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -205,11 +204,7 @@ def run_fit(args) -> int:
             bar.close()
     with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         report = write_fit_outputs(result, tmp, figures=not args.no_figures)
-        if args.export_format:
-            from .export_command import write_result
-
-            write_result(result.surface, tmp / f"surface.{args.export_format}", format=args.export_format,
-                         tolerance=args.export_tolerance)
+        write_requested_format(args, result.surface, tmp, "surface")
     m = report["metrics"]
     line = (
         f"{cfg.pipeline}: {report['iterations']} iterations in {report['seconds']:.2f} s; "

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import InputError, OptionError
 from ..patches.config import PatchConfig
+from .export_command import add_format_option, write_requested_format
 
 
 def _help(name: str) -> str:
@@ -47,8 +48,6 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
-    from .export_command import add_format_option
-
     add_format_option(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -144,11 +143,8 @@ def run_patches(args) -> int:
         bars.close()
     with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         report = write_patch_outputs(result, tmp, figures=not args.no_figures, extra={"input": str(args.input)})
-        if args.export_format and result.faces:
-            from .export_command import write_result
-
-            write_result(result.faces, tmp / f"patches.{args.export_format}", format=args.export_format,
-                         tolerance=args.export_tolerance)
+        if result.faces:
+            write_requested_format(args, result.faces, tmp, "patches")
     m = report["metrics"]
     line = (
         f"{m['N']} patches from {result.planar['planes']} planes in {report['seconds']:.1f} s; "

@@ -16,6 +16,7 @@ import json
 import sys
 
 from ._options import add_config_options, add_device_options, config_from_args, device_and_dtype
+from .export_command import add_format_option, write_requested_format
 
 
 def register(subparsers) -> None:
@@ -41,8 +42,6 @@ def register(subparsers) -> None:
     add_config_options(p, VolumeFitConfig, default_config())
     add_device_options(p, dtype_default="float32")
     p.add_argument("--overwrite", action="store_true", help="replace an existing non-empty --out directory")
-    from .export_command import add_format_option
-
     add_format_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
@@ -93,11 +92,8 @@ def run(args) -> int:
     with output_directory(args.out, args.overwrite, inputs=[args.front, args.left, args.top]) as tmp:
         write_mesh(tmp / "mesh.obj", result.mesh.vertices, result.mesh.faces)
         write_mesh(tmp / "mesh.ply", result.mesh.vertices, result.mesh.faces)
-        if args.export_format and not result.mesh.is_empty:
-            from .export_command import write_result
-
-            write_result(result.mesh, tmp / f"mesh.{args.export_format}", format=args.export_format,
-                         tolerance=args.export_tolerance)
+        if not result.mesh.is_empty:
+            write_requested_format(args, result.mesh, tmp, "mesh")
         save(result.volume, tmp / "volume.json")
         write_comparison_png(tmp / "views.png", result.drawings, result.projections, result.iou)
         with atomic_open(tmp / "report.json", "w", encoding="utf-8") as fh:
