@@ -147,6 +147,18 @@ def _wait(predicate, what: str, timeout: float = 30.0):
     raise AssertionError(f"timed out waiting for {what}")
 
 
+def settle(apply, check, what: str, attempts: int = 4):
+    """Type into the page until the server holds the values: under load a browser may
+    lose an edit to a re-render, and typing again is what a person would do."""
+    for _ in range(attempts):
+        apply()
+        try:
+            return _wait(check, what, timeout=8.0)
+        except AssertionError:
+            continue
+    raise AssertionError(f"timed out waiting for {what}")
+
+
 def field(page, label: str, nth: int = 0):
     """The input whose label reads ``label`` (viser labels point at their input by id)."""
     lab = page.locator("label:visible", has_text=label).first
@@ -405,12 +417,14 @@ def test_supervised_fit_side_by_side(page, area):
     field(page, "Pipeline").click()
     page.get_by_role("option", name="SOC", exact=True).click()
     _wait(lambda: tab.pipeline.value == "SOC", "the pipeline choice")
-    set_number(page, "Iterations", 20)
-    for i in (0, 1):
-        grid = field(page, "Target grid", i)
-        grid.fill("12")
-        grid.press("Enter")
-    _wait(lambda: tab.iters.value == 20 and tuple(tab.resolution.value) == (12, 12), "the settings")
+    def apply():
+        set_number(page, "Iterations", 20)
+        for i in (0, 1):
+            grid = field(page, "Target grid", i)
+            grid.fill("12")
+            grid.press("Enter")
+
+    settle(apply, lambda: tab.iters.value == 20 and tuple(tab.resolution.value) == (12, 12), "the settings")
     page.get_by_role("button", name="Fit", exact=True).click()
     see(page, "RMS to target", 60000)
     assert tab.result is not None and tab.result.surface.sizes == (5, 5)
@@ -462,10 +476,12 @@ def test_volume_tab(page):
     tab = page.session.tabs["Volume from drawings"]
     page.get_by_role("button", name="Use the paper's drawings").click()
     see(page, "the paper's drawings (front", 20000)
-    set_number(page, "Control values per axis", 8)
-    set_number(page, "Cost grid per axis", 12)
-    set_number(page, "Iterations", 10)
-    _wait(lambda: tab.iters.value == 10 and tab.control.value == 8, "the settings")
+    def apply():
+        set_number(page, "Control values per axis", 8)
+        set_number(page, "Cost grid per axis", 12)
+        set_number(page, "Iterations", 10)
+
+    settle(apply, lambda: tab.iters.value == 10 and tab.control.value == 8, "the settings")
     page.get_by_role("button", name="Fit volume").click()
     see(page, "IoU front", 60000)
     assert tab.fit is not None and not tab.fit.mesh.is_empty
@@ -479,9 +495,11 @@ def test_patches_tab(page, area, tmp_path):
     field(page, "Path in workdir").fill("corner.ply")
     page.get_by_role("button", name="Load cloud or mesh from workdir").click()
     see(page, "loaded corner.ply: 360 points", 20000)
-    set_number(page, "Max control grid per patch", 8)
-    set_number(page, "Refinement iterations per final patch", 0)
-    _wait(lambda: tab.max_ctrl.value == 8 and tab.final_iters.value == 0, "the settings")
+    def apply():
+        set_number(page, "Max control grid per patch", 8)
+        set_number(page, "Refinement iterations per final patch", 0)
+
+    settle(apply, lambda: tab.max_ctrl.value == 8 and tab.final_iters.value == 0, "the settings")
     page.get_by_role("button", name="Fit patches").click()
     see(page, "P_cov^o", 60000)
     result = tab.result
