@@ -1,6 +1,7 @@
 """Figures (matplotlib loads only when a plotting function is called)."""
 
-_NAMES = ("plot_wireframe", "plot_clouds", "plot_error_map", "plot_loss", "plot_fit_panels")
+_NAMES = ("plot_wireframe", "plot_clouds", "plot_error_map", "plot_loss", "plot_fit_panels",
+          "plot_training")
 
 
 def __getattr__(name: str):

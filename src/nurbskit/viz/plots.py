@@ -144,6 +144,31 @@ def plot_loss(history: Sequence[dict], path: str | os.PathLike, alternation: Seq
     return _save(fig, path)
 
 
+def plot_training(history: Sequence[dict], path: str | os.PathLike, title: str = "training") -> Path:
+    """Training curves: one line per numeric key of ``history`` records, against ``step`` (log scale).
+
+    ``history`` records are ``{"step": int, "seconds": float, <name>: float, ...}`` (see
+    :func:`nurbskit.learn.train`); keys starting with ``val_`` are drawn dashed.
+    """
+    fig = _figure((7, 4))
+    ax = fig.subplots()
+    keys = [k for k in (history[0] if history else {}) if k not in ("step", "seconds", "lr")]
+    steps = np.asarray([rec["step"] for rec in history], dtype=float)
+    for key in keys:
+        values = np.asarray([rec.get(key, np.nan) for rec in history], dtype=float)
+        style = "--" if key.startswith("val_") else "-"
+        if np.all(values[np.isfinite(values)] > 0):
+            ax.semilogy(steps, values, style, label=key)
+        else:
+            ax.plot(steps, values, style, label=key)
+    ax.set_xlabel("step")
+    ax.set_title(title)
+    if keys:
+        ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    return _save(fig, path)
+
+
 def plot_fit_panels(points, panels: Sequence[tuple[str, object]], path: str | os.PathLike,
                     title: str = "", columns: int = 4) -> Path:
     """One panel per fit: the input ``(N, 3)`` in blue and each output grid ``(R, S, 3)`` as a wireframe.

@@ -1,0 +1,118 @@
+"""``nurbskit train MODEL``: train one of nurbskit's networks on data it generates.
+
+Every model trains through the one loop of :func:`nurbskit.learn.train`; a model's module
+adds its sub-command here by listing itself in :data:`TRAINERS` and defining
+``register_train(subparsers)``, which builds its parser with :func:`add_training_options`
+and runs with :func:`run_training`.
+
+Writes to ``--out`` (resumable with ``--resume``): ``checkpoint.pt``, ``weights.pt``,
+``history.json``, ``training.png``. Copy ``weights.pt`` to
+``src/nurbskit/learn/weights/<name>.pt`` to ship it (``docs/learned.md``).
+
+Examples::
+
+    nurbskit train curves --mode V --steps 4000 --out runs/curves_v
+    nurbskit train curves --mode V --steps 6000 --out runs/curves_v --resume
+"""
+
+from __future__ import annotations
+
+import importlib
+import shlex
+import sys
+from pathlib import Path
+
+from ._options import int_in, number_in
+
+# Modules that add a ``nurbskit train <model>`` sub-command (``register_train(subparsers)``).
+TRAINERS: tuple[str, ...] = (
+)
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "train", help="train one of nurbskit's networks on generated data",
+        description="Train a network on data nurbskit generates (deterministic by --seed); "
+                    "checkpoints, weights, history and a training-curve figure go to --out.",
+    )
+    models = p.add_subparsers(dest="model", metavar="MODEL")
+    for name in TRAINERS:
+        importlib.import_module(name).register_train(models)
+    p.set_defaults(run=_no_model)
+
+
+def _no_model(args) -> int:
+    from ..errors import OptionError
+
+    raise OptionError("train: name the model to train (nurbskit train --help lists them)")
+
+
+def add_training_options(parser, defaults) -> None:
+    """The options every ``nurbskit train`` sub-command shares; ``defaults`` a TrainConfig."""
+    parser.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, weights, figures)")
+    parser.add_argument("--steps", type=int_in(1), default=defaults.steps, metavar="N",
+                        help=f"optimiser steps (default {defaults.steps})")
+    parser.add_argument("--batch-size", type=int_in(1, 4096), default=defaults.batch_size, metavar="B",
+                        help=f"examples per step (default {defaults.batch_size})")
+    parser.add_argument("--lr", type=number_in(0, 1, low_open=True), default=defaults.lr,
+                        help=f"peak learning rate (AdamW, cosine decay; default {defaults.lr})")
+    parser.add_argument("--seed", type=int_in(0), default=defaults.seed,
+                        help=f"seed of the generated data and of the initial weights (default {defaults.seed})")
+    parser.add_argument("--checkpoint-every", type=int_in(1), default=defaults.checkpoint_every, metavar="N",
+                        help=f"steps between checkpoints (default {defaults.checkpoint_every})")
+    parser.add_argument("--threads", type=int_in(1, 256), default=None, metavar="T",
+                        help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier run's files in --out")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def training_config(args, defaults):
+    """A TrainConfig from the shared options (fields not on the command line keep ``defaults``)."""
+    from dataclasses import replace
+
+    return replace(defaults, steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
+                   checkpoint_every=args.checkpoint_every)
+
+
+def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, validate=None):
+    """Build the model (initial weights drawn from ``--seed``) and train it with a progress bar.
+
+    ``build_model()`` returns the network; the rest as :func:`nurbskit.learn.train`.
+    Prints one summary line; returns the :class:`~nurbskit.learn.TrainRun`.
+    """
+    import torch
+
+    from ..learn import train
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    meta = dict(meta, command="nurbskit " + " ".join(shlex.quote(a) for a in sys.argv[1:] if a != "--quiet"),
+                torch=torch.__version__)
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.steps, desc=f"train {meta.get('name', '')}", unit="step", file=sys.stderr,
+                   leave=False)
+
+    def progress(step, steps, values):
+        if bar is not None:
+            bar.n = step
+            bar.set_postfix_str(f"loss={values['loss']:.3e}", refresh=False)
+            bar.update(0)
+
+    with torch.random.fork_rng(devices=[]):  # the initial weights follow --seed; the global RNG is untouched
+        torch.manual_seed(config.seed)
+        model = build_model()
+    try:
+        run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,
+                    overwrite=args.overwrite, progress=progress, validate=validate)
+    finally:
+        if bar is not None:
+            bar.close()
+    last = run.history[-1] if run.history else {}
+    shown = ", ".join(f"{k} {v:.4g}" for k, v in last.items() if k not in ("step", "seconds", "lr"))
+    print(f"{meta.get('name', 'model')}: {run.step} steps in {run.seconds:.1f} s; {shown}")
+    print(f"wrote {Path(args.out)}/: checkpoint.pt, weights.pt, history.json, training.png")
+    return run
