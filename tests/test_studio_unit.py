@@ -307,3 +307,32 @@ def test_shape_tab_parts():
     md = _shape_markdown(fit)
     assert "| kind | revolution |" in md and f"{fit.distance_mean:.3g} of diag." in md
     assert "axis direction" in md
+
+
+def test_server_listens_before_the_fitting_code_imports(tmp_path):
+    """Start-up order (issue 13: interactive within 3 s): ``nurbskit studio`` parses only its
+    own options and the server listens before torch is imported; the tabs come after."""
+    import subprocess
+    import sys
+
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
+    script = (
+        "import sys\n"
+        "from nurbskit.cli import build_parser\n"
+        f"build_parser('studio').parse_args(['studio', '--workdir', {str(tmp_path)!r}])\n"
+        "from nurbskit.studio.app import Studio, StudioOptions\n"
+        "before = 'torch' in sys.modules\n"
+        f"s = Studio(StudioOptions(port=0, workdir={str(tmp_path)!r}))\n"
+        "s.start()\n"
+        "listening = s.port > 0\n"
+        "s.wait_ready(120)\n"
+        "print('RESULT', before, listening, 'torch' in sys.modules, s.load_error, [t.label for t in s.tabs][:3])\n"
+        "s.stop()\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    [line] = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
+    assert line == "RESULT False True True None ['Unsupervised', 'Supervised', 'NURBS Generator']"

@@ -436,12 +436,20 @@ class Studio:
     def __init__(self, options: StudioOptions):
         self.options = options
         self.workdir = Workdir(options.workdir)
-        self.tabs = available_tabs()
+        self.tabs: list = []  # filled by the loader thread (see start)
+        self.ready = threading.Event()
+        self.load_error: str | None = None
         self.sessions: dict[int, Session] = {}
         self.server = None
         self._lock = threading.Lock()
 
     def start(self) -> "Studio":
+        """Listen first, then import the fitting code (torch, the capabilities) on a thread.
+
+        The page's code (a few MB of JavaScript) loads in the browser while the
+        capabilities import here; a client that connects before they are in sees a
+        "loading" line, and its tabs are built as soon as they are (:meth:`_connect`).
+        """
         viser = require("viser", "studio", "nurbskit studio")
         self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
@@ -451,6 +459,22 @@ class Studio:
         self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        threading.Thread(target=self._load, name="nurbskit-studio-import", daemon=True).start()
+        return self
+
+    def _load(self) -> None:
+        """Import every tab's capability and builder (the slow part of start-up: torch)."""
+        try:
+            self.tabs = available_tabs()
+        except BaseException as exc:  # noqa: BLE001 - shown in every page; the server keeps serving
+            self.load_error = describe_error(exc)
+        finally:
+            self.ready.set()
+
+    def wait_ready(self, timeout: float | None = None) -> "Studio":
+        """Block until the tabs' code is imported (a test or script that wants them now)."""
+        if not self.ready.wait(timeout):
+            raise TimeoutError(f"the studio's tabs were not ready after {timeout} s")
         return self
 
     @property
@@ -464,6 +488,14 @@ class Studio:
         return f"http://{shown}:{self.port}/"
 
     def _connect(self, client) -> None:
+        # viser runs this on a worker thread: waiting here for the imports holds no one else up
+        if not self.ready.is_set():
+            notice = client.gui.add_markdown("*Loading nurbskit's fitting code ...*")
+            self.ready.wait()
+            notice.remove()
+        if self.load_error is not None:
+            client.gui.add_markdown(f"**Error:** the studio could not load its tabs: {html.escape(self.load_error)}")
+            return
         session = Session(self, client)
         with self._lock:
             self.sessions[client.client_id] = session
