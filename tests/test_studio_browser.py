@@ -231,7 +231,7 @@ def outside_untouched(area) -> None:
 def test_page_shows_tabs_and_draws(page):
     show_tab(page, "NURBS Generator")
     for name in ("Unsupervised", "Supervised", "NURBS Generator", "Patches", "Revolve / Extrude",
-                 "Volume from drawings"):
+                 "Curves from images", "Volume from drawings"):
         assert page.get_by_role("tab", name=name, exact=True).is_visible()
     # the generator's first surface is on screen: the viewport is not blank
     _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface to be drawn")
@@ -559,4 +559,73 @@ def test_shape_tab(page, area):
     assert non_background(viewport_pixels(page)) > 2000
     page.locator("td:visible", has_text="mean distance").first.scroll_into_view_if_needed()
     shot(page, "studio-shape.png")
+    outside_untouched(area)
+
+
+def test_curves_tab(page, area, tmp_path):
+    """A drawn cubic (known control points) -> one curve on the page, its report, and the
+    curves.json and curves.svg downloads read back."""
+    import json
+    import xml.etree.ElementTree as ET
+
+    from PIL import Image
+
+    from nurbskit.core.serialize import from_dict
+    from nurbskit.curves.classic import chamfer_points
+    from nurbskit.curves.synthetic import curve_of, dense_samples, render
+
+    show_tab(page, "Curves from images")
+    tab = page.session.tabs["Curves from images"]
+    known = np.array([[14.0, 100.0], [40.0, 20.0], [80.0, 30.0], [112.0, 96.0]])
+    ink = render([dense_samples(curve_of(known))], (128, 160), 2.0)
+    buffer = io.BytesIO()
+    Image.fromarray(np.round(255 * (1.0 - ink)).astype(np.uint8), mode="L").save(buffer, format="PNG")
+    # garbage with an image's name: refused by its content, the tab keeps nothing
+    upload(page, "Load image: upload a file",
+           [{"name": "fake.png", "mimeType": "image/png", "buffer": b"\x89PNG\r\n not really"}])
+    assert "fake.png" in error_text(page) and tab.grey is None
+    upload(page, "Load image: upload a file",
+           [{"name": "spline.png", "mimeType": "image/png", "buffer": buffer.getvalue()}])
+    see(page, "loaded spline.png: 160 x 128 pixels", 20000)
+    assert tab.grey.shape == (128, 160) and "image" in tab.handles
+    before = viewport_pixels(page)
+    page.get_by_role("button", name="Find curves").click()
+    see(page, "found 1 curve(s)", 60000)
+    [curve] = tab.curves
+    # the curve is the drawn one (within a pixel), and the page shows the run's own numbers
+    assert chamfer_points(dense_samples(curve), dense_samples(curve_of(known)))["symmetric"] < 1.0
+    see(page, "Chamfer curves -> ink", 10000)
+    cells = [t.strip() for t in page.locator("td:visible").all_inner_texts()]
+    row = {cells[i]: cells[i + 1] for i in range(0, len(cells) - 1, 2)}
+    assert row["curves"] == "1", row
+    assert row["control points"] == str(curve.control_points.shape[0]), row
+    assert row["Chamfer curves -> ink"] == f"{tab.report['chamfer']['curves_to_ink']:.3f} px", row
+    # the curve is drawn over the image: the view changed
+    time.sleep(0.5)
+    after = viewport_pixels(page)
+    assert int((np.abs(after - before).sum(-1) > 30).sum()) > 100, "the curve did not appear over the image"
+    page.locator("td:visible", has_text="Chamfer ink").first.scroll_into_view_if_needed()
+    shot(page, "studio-curves.png")
+    # curves.json (the default format) downloads and reads back to the same curve
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    assert path.name == "spline-curves.json"
+    data = json.loads(path.read_text())
+    assert data["size"] == [160, 128] and "top-left" in data["coordinates"]
+    [back] = [from_dict(d) for d in data["curves"]]
+    assert_close(back.control_points, curve.control_points, atol=1e-12)
+    # curves.svg: one path starting at the curve's first control point
+    field(page, "Export format").click()
+    page.get_by_role("option", name="curves.svg", exact=True).click()
+    _wait(lambda: tab.export.format.value == "curves.svg", "the SVG format")
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    paths = [e for e in ET.parse(path).getroot().iter() if e.tag.endswith("path")]
+    assert path.name == "spline-curves.svg" and len(paths) == 1
+    start = np.array([float(v) for v in paths[0].get("d").split()[1:3]])
+    assert_close(start, curve.control_points[0].numpy(), atol=1e-3)
     outside_untouched(area)

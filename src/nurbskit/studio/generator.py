@@ -24,7 +24,7 @@ import torch
 
 from .. import NURBSCurve, NURBSSurface, NURBSVolume
 from ..errors import OptionError
-from .app import ExportPanel, Status, describe_error
+from .app import TabBase
 from .scene import SURFACE_COLOR, SplineView, diagonal
 
 KINDS = ("surface", "curve", "volume")
@@ -102,22 +102,22 @@ def make_object(kind: str, sizes, degrees, knots: str):
     return obj, (nfree if periodic else None)
 
 
-class GeneratorTab:
+class GeneratorTab(TabBase):
     """Create and edit a curve, surface or volume."""
 
     label = "NURBS Generator"
+    scene = "generator"
+    stem = "generated"
 
     def __init__(self, session, ui):
-        self.session = session
+        super().__init__(session, ui)
         scene = session.client.scene
-        self.root = scene.add_frame("/generator", show_axes=False)
         self.lock = threading.RLock()
         self.obj = None
         self.other = None  # the second piece of a split
         self.periodic_free: int | None = None
         self._syncing = False
         self.updates = 0
-        self.status = Status(session, ui)
         self.kind = ui.add_dropdown("Object", KINDS, initial_value="surface")
         self.sizes = ui.add_vector3("Sizes (u, v, w)", (6, 5, 4), min=(2, 2, 2), max=(64, 64, 32), step=1)
         self.degrees = ui.add_vector3("Degrees (u, v, w)", (3, 3, 2), min=(1, 1, 1), max=(7, 7, 7), step=1)
@@ -133,28 +133,22 @@ class GeneratorTab:
         self.split_button = ui.add_button("Split")
         self.display = ui.add_dropdown("Show", ("shaded", "curvature", "normals"), initial_value="shaded")
         self.info = ui.add_markdown("")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.add_export()
         self.view = SplineView(scene, "/generator/object", SURFACE_COLOR)
         self.other_view = SplineView(scene, "/generator/other", (160, 160, 160))
         self.handle = scene.add_transform_controls("/generator/handle", scale=0.25, disable_rotations=True,
                                                    depth_test=False)
 
-        self.create.on_click(lambda e: self._guard(self.rebuild))
-        self.index.on_update(lambda e: self._guard(self._select))
-        self.position.on_update(lambda e: self._guard(self._from_widget))
-        self.weight.on_update(lambda e: self._guard(self._weight))
-        self.insert.on_click(lambda e: self._guard(lambda: self._op("insert")))
-        self.elevate.on_click(lambda e: self._guard(lambda: self._op("elevate")))
-        self.split_button.on_click(lambda e: self._guard(lambda: self._op("split")))
-        self.display.on_update(lambda e: self._guard(self._redisplay))
-        self.handle.on_update(lambda e: self._guard(self._from_handle))
-        self._guard(self.rebuild)
-
-    def _guard(self, fn) -> None:
-        try:
-            fn()
-        except Exception as exc:  # shown in the page; the server carries on
-            self.status.error(describe_error(exc))
+        self.create.on_click(lambda e: self.guard(self.rebuild))
+        self.index.on_update(lambda e: self.guard(self._select))
+        self.position.on_update(lambda e: self.guard(self._from_widget))
+        self.weight.on_update(lambda e: self.guard(self._weight))
+        self.insert.on_click(lambda e: self.guard(lambda: self._op("insert")))
+        self.elevate.on_click(lambda e: self.guard(lambda: self._op("elevate")))
+        self.split_button.on_click(lambda e: self.guard(lambda: self._op("split")))
+        self.display.on_update(lambda e: self.guard(self._redisplay))
+        self.handle.on_update(lambda e: self.guard(self._from_handle))
+        self.guard(self.rebuild)
 
     # ---- building ------------------------------------------------------------------------
     def rebuild(self) -> None:
