@@ -148,21 +148,27 @@ class GeneratorTab(TabBase):
         self.split_button.on_click(lambda e: self.guard(lambda: self._op("split")))
         self.display.on_update(lambda e: self.guard(self._redisplay))
         self.handle.on_update(lambda e: self.guard(self._from_handle))
-        self.guard(self.rebuild)
+        # the first object is built but drawn hidden: the page opens on another tab, and
+        # its first paint need not wait for the surface's shaders (software WebGL: seconds)
+        self.guard(lambda: self.rebuild(show=False))
 
     # ---- building ------------------------------------------------------------------------
-    def rebuild(self) -> None:
+    def rebuild(self, show: bool = True) -> None:
         with self.lock:
             obj, free = make_object(self.kind.value, self.sizes.value, self.degrees.value, self.knots.value)
-            self.set_object(obj, free)
+            self.set_object(obj, free, show=show)
             self.status.info(f"created a {obj.kind} with {tuple(obj.sizes)} control points")
 
-    def set_object(self, obj, periodic_free=None, other=None, frame: bool = True) -> None:
+    def set_object(self, obj, periodic_free=None, other=None, frame: bool = True, show: bool = True) -> None:
+        """Edit ``obj`` from now on; ``show``: bring this tab to the 3-D view (else drawn hidden)."""
         with self.lock:
             self.obj = obj.to(torch.float64).clone()
             self.periodic_free = periodic_free
             self.other = other
-            self.session.focus(self.label)
+            if show:
+                self.session.focus(self.label)
+            else:
+                self.root.visible = False
             self.view.mode = self.display.value
             self.view.clear()
             self.view.draw(self.obj)
@@ -171,7 +177,7 @@ class GeneratorTab(TabBase):
                 self.other_view.draw(other.to(torch.float64))
             self._describe()
             self._select()
-            if frame:
+            if frame and show:
                 self.session.frame(self.obj.control_points.numpy()[..., :3])
 
     def _describe(self) -> None:
