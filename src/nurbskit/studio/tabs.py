@@ -702,6 +702,7 @@ class CurvesTab(TabBase):
         t0 = time.perf_counter()
         curves = nurbskit.curves_from_image(self.grey, **kwargs)
         seconds = time.perf_counter() - t0
+        progress(0.9)  # raises Stopped when Stop was pressed meanwhile (the call itself has no callback)
         ink, inverted = ink_mask(self.grey, self.name)
         h, w = self.grey.shape
         return curves, {
