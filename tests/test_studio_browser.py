@@ -5,10 +5,11 @@ limit) and one browser serve every test of the module; each test opens its own p
 (its own viser client, hence its own session). What is checked is what a person sees:
 text in the panel, pixels in the 3-D viewport, files that arrive as downloads.
 
-The 3-D transform handle is a three.js gizmo without DOM elements, so the drag test
-moves the control point through the "Point position" widget, which takes the same
-server-side update path (``GeneratorTab.set_point``) as the handle; the handle's own
-path is driven server-side in ``test_transform_handle_path``.
+The 3-D transform handle is a three.js gizmo drawn in the canvas, without DOM elements:
+``test_gizmo_drag`` finds its z arrow on screen by projecting the handle's position with
+the camera the page reports (position, orientation, vertical field of view, canvas
+size) and drags it with the mouse; ``test_generator_edit_changes_the_render`` moves a
+point through the "Point position" widget (the same ``GeneratorTab.set_point`` path).
 
 Without viser, Playwright or Chromium these tests skip, and they fail when
 ``NURBSKIT_REQUIRE_EXTRAS=1`` (set by .ci/run).
@@ -231,7 +232,7 @@ def outside_untouched(area) -> None:
 def test_page_shows_tabs_and_draws(page):
     show_tab(page, "NURBS Generator")
     for name in ("Unsupervised", "Supervised", "NURBS Generator", "Patches", "Revolve / Extrude",
-                 "Volume from drawings"):
+                 "Curves from images", "Volume from drawings"):
         assert page.get_by_role("tab", name=name, exact=True).is_visible()
     # the generator's first surface is on screen: the viewport is not blank
     _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface to be drawn")
@@ -368,6 +369,62 @@ def test_transform_handle_path(page):
     tab._from_handle()
     assert_close(tab.obj.control_points[1, 3], torch.tensor([0.1, 0.2, -0.5], dtype=torch.float64), atol=1e-12)
     assert tuple(tab.position.value) == pytest.approx((0.1, 0.2, -0.5), abs=1e-12)
+
+
+def screen_point(camera, xyz) -> np.ndarray:
+    """Where the page draws the world point ``xyz``: CSS pixels ``(x, y)`` in the canvas.
+
+    Convention: viser's camera follows OpenCV (``wxyz`` rotates camera to world; +z looks
+    ahead, +y points down on screen); ``fov`` is the vertical field of view.
+    """
+    from viser import transforms as tf
+
+    R = tf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    p = R.T @ (np.asarray(xyz, np.float64) - np.asarray(camera.position, np.float64))
+    f = (camera.image_height / 2) / np.tan(camera.fov / 2)
+    return np.array([camera.image_width / 2 + f * p[0] / p[2], camera.image_height / 2 + f * p[1] / p[2]])
+
+
+def test_gizmo_drag(page):
+    """Drag the transform handle's z arrow with the mouse: the control point rises along z
+    only, the server's object follows the handle, and the rendered surface changes."""
+    show_tab(page, "NURBS Generator")
+    tab = page.session.tabs["NURBS Generator"]
+    camera = page.session.client.camera
+    page.get_by_role("button", name="Create", exact=True).click()
+    _wait(lambda: tab.obj is not None and tab.obj.sizes == (6, 5), "a fresh surface")
+
+    def still():  # the page reports its camera after the studio framed the surface
+        first = (tuple(camera.position), tuple(camera.wxyz))
+        time.sleep(0.4)
+        return first == (tuple(camera.position), tuple(camera.wxyz))
+
+    _wait(still, "the camera to settle")
+    _wait(lambda: non_background(viewport_pixels(page)) > 2000, "the surface")
+    time.sleep(0.5)
+    before_pixels = viewport_pixels(page)
+    idx = tab._index()
+    start = np.asarray(tab.handle.position, np.float64).copy()
+    cp_before = tab.obj.control_points.clone()
+    updates = tab.updates
+    grip = screen_point(camera, start + [0.0, 0.0, 0.75 * float(tab.handle.scale)])
+    assert 0 < grip[0] < 590 and 0 < grip[1] < camera.image_height, f"the handle is off the view at {grip}"
+    page.mouse.move(*grip)
+    time.sleep(0.3)
+    page.mouse.down()
+    for k in range(1, 11):
+        page.mouse.move(grip[0], grip[1] - 6 * k)
+        time.sleep(0.05)
+    page.mouse.up()
+    _wait(lambda: tab.updates > updates and float(tab.handle.position[2]) > start[2] + 0.05, "the dragged handle")
+    time.sleep(1.0)  # the last drag message
+    moved = np.asarray(tab.handle.position, np.float64)
+    assert_close(moved[:2], start[:2], atol=1e-9)  # the z arrow moves along z only
+    assert_close(tab.obj.control_points[idx], torch.as_tensor(moved), atol=1e-12)
+    changed = (tab.obj.control_points - cp_before).abs().sum(-1) > 0
+    assert int(changed.sum()) == 1 and bool(changed[idx])
+    after_pixels = viewport_pixels(page)
+    assert int((np.abs(after_pixels - before_pixels).sum(-1) > 30).sum()) > 300, "the render did not change"
 
 
 def test_generator_knot_ops_and_export_download(page, area, tmp_path):
@@ -559,4 +616,73 @@ def test_shape_tab(page, area):
     assert non_background(viewport_pixels(page)) > 2000
     page.locator("td:visible", has_text="mean distance").first.scroll_into_view_if_needed()
     shot(page, "studio-shape.png")
+    outside_untouched(area)
+
+
+def test_curves_tab(page, area, tmp_path):
+    """A drawn cubic (known control points) -> one curve on the page, its report, and the
+    curves.json and curves.svg downloads read back."""
+    import json
+    import xml.etree.ElementTree as ET
+
+    from PIL import Image
+
+    from nurbskit.core.serialize import from_dict
+    from nurbskit.curves.classic import chamfer_points
+    from nurbskit.curves.synthetic import curve_of, dense_samples, render
+
+    show_tab(page, "Curves from images")
+    tab = page.session.tabs["Curves from images"]
+    known = np.array([[14.0, 100.0], [40.0, 20.0], [80.0, 30.0], [112.0, 96.0]])
+    ink = render([dense_samples(curve_of(known))], (128, 160), 2.0)
+    buffer = io.BytesIO()
+    Image.fromarray(np.round(255 * (1.0 - ink)).astype(np.uint8), mode="L").save(buffer, format="PNG")
+    # garbage with an image's name: refused by its content, the tab keeps nothing
+    upload(page, "Load image: upload a file",
+           [{"name": "fake.png", "mimeType": "image/png", "buffer": b"\x89PNG\r\n not really"}])
+    assert "fake.png" in error_text(page) and tab.grey is None
+    upload(page, "Load image: upload a file",
+           [{"name": "spline.png", "mimeType": "image/png", "buffer": buffer.getvalue()}])
+    see(page, "loaded spline.png: 160 x 128 pixels", 20000)
+    assert tab.grey.shape == (128, 160) and "image" in tab.handles
+    before = viewport_pixels(page)
+    page.get_by_role("button", name="Find curves").click()
+    see(page, "found 1 curve(s)", 60000)
+    [curve] = tab.curves
+    # the curve is the drawn one (within a pixel), and the page shows the run's own numbers
+    assert chamfer_points(dense_samples(curve), dense_samples(curve_of(known)))["symmetric"] < 1.0
+    see(page, "Chamfer curves -> ink", 10000)
+    cells = [t.strip() for t in page.locator("td:visible").all_inner_texts()]
+    row = {cells[i]: cells[i + 1] for i in range(0, len(cells) - 1, 2)}
+    assert row["curves"] == "1", row
+    assert row["control points"] == str(curve.control_points.shape[0]), row
+    assert row["Chamfer curves -> ink"] == f"{tab.report['chamfer']['curves_to_ink']:.3f} px", row
+    # the curve is drawn over the image: the view changed
+    time.sleep(0.5)
+    after = viewport_pixels(page)
+    assert int((np.abs(after - before).sum(-1) > 30).sum()) > 100, "the curve did not appear over the image"
+    page.locator("td:visible", has_text="Chamfer ink").first.scroll_into_view_if_needed()
+    shot(page, "studio-curves.png")
+    # curves.json (the default format) downloads and reads back to the same curve
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    assert path.name == "spline-curves.json"
+    data = json.loads(path.read_text())
+    assert data["size"] == [160, 128] and "top-left" in data["coordinates"]
+    [back] = [from_dict(d) for d in data["curves"]]
+    assert_close(back.control_points, curve.control_points, atol=1e-12)
+    # curves.svg: one path starting at the curve's first control point
+    field(page, "Export format").click()
+    page.get_by_role("option", name="curves.svg", exact=True).click()
+    _wait(lambda: tab.export.format.value == "curves.svg", "the SVG format")
+    with page.expect_download(timeout=30000) as info:
+        page.get_by_role("button", name="Download").click()
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    paths = [e for e in ET.parse(path).getroot().iter() if e.tag.endswith("path")]
+    assert path.name == "spline-curves.svg" and len(paths) == 1
+    start = np.array([float(v) for v in paths[0].get("d").split()[1:3]])
+    assert_close(start, curve.control_points[0].numpy(), atol=1e-3)
     outside_untouched(area)

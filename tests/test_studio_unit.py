@@ -279,7 +279,7 @@ def test_patches_tab_parts(tmp_path):
 
     panel = ExportPanel.__new__(ExportPanel)
     panel.shown = lambda: (result.faces, (v, f), "corner-patches")
-    panel.cad = cad_writers()
+    panel.cad, panel.own = cad_writers(), {}
     assert "STEP" in panel.cad
     panel.format = type("F", (), {"value": "STEP"})()
     panel.write(tmp_path / "corner.step")
@@ -307,3 +307,60 @@ def test_shape_tab_parts():
     md = _shape_markdown(fit)
     assert "| kind | revolution |" in md and f"{fit.distance_mean:.3g} of diag." in md
     assert "axis direction" in md
+
+
+def test_server_listens_before_the_fitting_code_imports(tmp_path):
+    """Start-up order (issue 13: interactive within 3 s): ``nurbskit studio`` parses only its
+    own options and the server listens before torch is imported; the tabs come after."""
+    import subprocess
+    import sys
+
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
+    script = (
+        "import sys\n"
+        "from nurbskit.cli import build_parser\n"
+        f"build_parser('studio').parse_args(['studio', '--workdir', {str(tmp_path)!r}])\n"
+        "from nurbskit.studio.app import Studio, StudioOptions\n"
+        "before = 'torch' in sys.modules\n"
+        f"s = Studio(StudioOptions(port=0, workdir={str(tmp_path)!r}))\n"
+        "s.start()\n"
+        "listening = s.port > 0\n"
+        "s.wait_ready(120)\n"
+        "print('RESULT', before, listening, 'torch' in sys.modules, s.load_error, [t.label for t in s.tabs][:3])\n"
+        "s.stop()\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    [line] = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
+    assert line == "RESULT False True True None ['Unsupervised', 'Supervised', 'NURBS Generator']"
+
+
+def test_curves_tab_parts(monkeypatch):
+    """Pixels land upright in the z = 0 plane; curves become polylines through their ends; the
+    tab offers exactly the options ``curves_from_image`` has beyond the classic ones."""
+    import nurbskit.curves.api as api
+    from nurbskit.curves.synthetic import curve_of
+    from nurbskit.studio.tabs import curve_segments, image_to_world, method_options
+
+    assert_close(image_to_world(np.array([[3.0, 4.0], [0.5, 0.0]])),
+                 np.array([[3.0, -4.0, 0.0], [0.5, 0.0, 0.0]]), atol=0.0)
+    curve = curve_of(np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]]))
+    segs = curve_segments([curve, curve])
+    assert segs.shape[1:] == (2, 3) and segs.shape[0] >= 2 * 30  # at most 1 px apart
+    assert_close(segs[0, 0], np.zeros(3), atol=1e-12)
+    assert_close(segs[segs.shape[0] // 2 - 1, 1], np.array([30.0, 0.0, 0.0]), atol=1e-12)
+    half = segs.shape[0] // 2
+    assert_close(segs[1:half, 0], segs[:half - 1, 1], atol=0.0)  # one unbroken polyline per curve
+    assert float(np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1).max()) <= 1.0 + 1e-9
+
+    def with_mode(image, method="classic", tolerance=1.0, refine=False, refine_iterations=20, mode="auto"):
+        return []
+
+    expected = {k: v.default for k, v in __import__("inspect").signature(api.curves_from_image).parameters.items()
+                if k not in ("image", "method", "tolerance", "refine", "refine_iterations")}
+    assert method_options() == expected
+    monkeypatch.setattr(api, "curves_from_image", with_mode)
+    assert method_options() == {"mode": "auto"}

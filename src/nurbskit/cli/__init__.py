@@ -49,15 +49,28 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_USER_ERROR)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or only of ``command`` when its module is
+    ``nurbskit.cli.<command>_command`` (so that ``nurbskit studio`` does not import the
+    fitter, and torch, through the other commands' modules before it starts)."""
     from .. import __version__
 
     parser = _Parser(prog="nurbskit", description="NURBS geometry from point clouds, meshes and silhouettes.")
     parser.add_argument("--version", action="version", version=f"nurbskit {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMAND_MODULES:
+    own = f"nurbskit.cli.{command}_command" if command else None
+    for name in (own,) if own in COMMAND_MODULES else COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
     return parser
+
+
+def _command_of(argv: list[str] | None) -> str | None:
+    """The command a command line names (its first word that is not an option), if any."""
+    words = sys.argv[1:] if argv is None else argv
+    for word in words:
+        if not word.startswith("-"):
+            return word
+    return None
 
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:
@@ -119,7 +132,7 @@ def _main(argv: list[str] | None) -> int:
     args = None
     debug = os.environ.get("NURBSKIT_DEBUG", "") not in ("", "0")
     try:
-        parser = build_parser()
+        parser = build_parser(_command_of(argv))
         _add_debug(parser)
         args = parser.parse_args(argv)
         debug = debug or bool(getattr(args, "debug", False))

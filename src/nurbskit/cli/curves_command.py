@@ -94,6 +94,17 @@ def write_svg(path: Path, grey: np.ndarray, curves: list) -> None:
         fh.write("\n".join(lines) + "\n")
 
 
+def write_curves_json(path: Path, curves: list, size: tuple[int, int]) -> None:
+    """``{"coordinates", "size": [w, h], "curves": [nurbskit curve objects]}``, in pixel coordinates."""
+    from .._fs import atomic_open
+    from ..core.serialize import to_dict
+    from ..curves.api import COORDINATES
+
+    with atomic_open(path, "w") as fh:
+        json.dump({"coordinates": COORDINATES, "size": [int(size[0]), int(size[1])],
+                   "curves": [to_dict(c) for c in curves]}, fh, indent=1)
+
+
 def write_overlay(path: Path, grey: np.ndarray, curves: list) -> None:
     """The image in grey (scaled up to at least 512 px) with the curves in red and control points in blue."""
     from PIL import Image, ImageDraw
@@ -119,7 +130,6 @@ def write_overlay(path: Path, grey: np.ndarray, curves: list) -> None:
 
 def run_curves(args) -> int:
     from .._fs import atomic_open, check_output_dir, output_directory
-    from ..core.serialize import to_dict
     from ..curves.api import COORDINATES, read_image
     from ..curves.classic import chamfer_to_ink, fit_image
 
@@ -152,8 +162,7 @@ def run_curves(args) -> int:
         "files": ["curves.json", "curves.svg", "overlay.png", "report.json"],
     }
     with output_directory(args.out, args.overwrite, inputs=[args.image]) as tmp:
-        with atomic_open(tmp / "curves.json", "w") as fh:
-            json.dump({"coordinates": COORDINATES, "size": [w, h], "curves": [to_dict(c) for c in curves]}, fh, indent=1)
+        write_curves_json(tmp / "curves.json", curves, (w, h))
         write_svg(tmp / "curves.svg", grey, curves)
         write_overlay(tmp / "overlay.png", grey, curves)
         with atomic_open(tmp / "report.json", "w") as fh:

@@ -79,6 +79,22 @@ def describe_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
+def read_upload(session: "Session", file, read: Callable[[Path, str], object]) -> tuple[object, str]:
+    """``(read(scratch_path, name), name)`` of an uploaded ``file`` (viser's UploadedFile).
+
+    Size-checked, written under the workdir's scratch folder with a made-up name (only a
+    safe extension of the client's name is kept), read, and deleted whatever happens.
+    """
+    check_upload(file.name, file.content, session.options.max_upload_bytes)
+    name = Path(str(file.name).replace("\\", "/")).name
+    tmp = session.workdir.scratch(file.name)
+    try:
+        tmp.write_bytes(file.content)
+        return read(tmp, name), name
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 class Loader:
     """Upload a file, or pick one from the workdir; ``read(path)`` turns it into data.
 
@@ -118,15 +134,8 @@ class Loader:
             self.status.error(describe_error(exc))
 
     def _from_upload(self) -> None:
-        file = self.upload.value
-        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
-        tmp = self.session.workdir.scratch(file.name)
-        try:
-            tmp.write_bytes(file.content)
-            data = self.read(tmp, Path(file.name).name)
-        finally:
-            tmp.unlink(missing_ok=True)
-        self.on_loaded(data, Path(file.name).name)
+        data, name = read_upload(self.session, self.upload.value, self.read)
+        self.on_loaded(data, name)
 
     def _from_workdir(self) -> None:
         name = self.path.value or self.choice.value
@@ -243,13 +252,18 @@ EXPORT_FORMATS = {
 class ExportPanel:
     """Download what the tab shows (NURBS files, meshes, CAD once available) or a screenshot.
 
-    ``shown()`` returns ``(nurbs or None, (vertices, faces) or None, stem)``.
+    ``shown()`` returns ``(nurbs or None, (vertices, faces) or None, stem)``. A tab whose
+    output is not one NURBS object passes ``formats``: ``{label: (extension, write(path))}``
+    (the Curves tab: ``curves.json``, ``curves.svg``), which replace the NURBS and mesh
+    formats.
     """
 
-    def __init__(self, session: "Session", ui, status: Status, shown: Callable[[], tuple]):
+    def __init__(self, session: "Session", ui, status: Status, shown: Callable[[], tuple],
+                 formats: dict[str, tuple[str, Callable[[Path], None]]] | None = None):
         self.session, self.status, self.shown = session, status, shown
-        self.cad = cad_writers()
-        formats = tuple(EXPORT_FORMATS) + tuple(self.cad)
+        self.own = dict(formats or {})
+        self.cad = {} if self.own else cad_writers()
+        formats = tuple(self.own) if self.own else tuple(EXPORT_FORMATS) + tuple(self.cad)
         self.format = ui.add_dropdown("Export format", formats, initial_value=formats[0])
         self.download = ui.add_button("Download")
         self.save_name = ui.add_text("Save as (in workdir)", "")
@@ -269,8 +283,11 @@ class ExportPanel:
         """Write what is shown to ``path`` in the chosen format."""
         import nurbskit
 
-        obj, mesh, _ = self.shown()
         fmt = self.format.value
+        if fmt in self.own:
+            self.own[fmt][1](path)
+            return
+        obj, mesh, _ = self.shown()
         if fmt in ("OBJ mesh", "PLY mesh"):
             if mesh is None:
                 if obj is None or obj.para_dim != 2:
@@ -298,6 +315,8 @@ class ExportPanel:
 
     def extension(self) -> str:
         fmt = self.format.value
+        if fmt in self.own:
+            return self.own[fmt][0]
         return self.cad[fmt][0] if fmt in self.cad else EXPORT_FORMATS[fmt]
 
     def _download(self) -> None:
@@ -329,6 +348,83 @@ class ExportPanel:
         Image.fromarray(image).save(buffer, format="PNG")
         self.session.client.send_file_download("nurbskit-studio.png", buffer.getvalue(), save_immediately=True)
         self.status.info("screenshot downloaded")
+
+
+# ---- the parts of a tab, in one order ----------------------------------------------------
+
+def devices() -> tuple[str, ...]:
+    """The devices a fit may run on here."""
+    import torch
+
+    return ("cpu", "cuda") if torch.cuda.is_available() else ("cpu",)
+
+
+def markdown_table(title: str, rows) -> str:
+    """A two-column report table ``rows [(name, value)]`` under a bold ``title``."""
+    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
+    return f"**{title}**\n\n| | |\n|---|---|\n" + body
+
+
+def iteration_progress(progress: Callable, total: int) -> Callable:
+    """A fitting loop's ``callback(p)`` (``p.loss``) that moves the bar one iteration of ``total``."""
+    done = [0]
+
+    def callback(p) -> None:
+        done[0] += 1
+        progress(min(1.0, done[0] / max(1, total)), p.loss)
+
+    return callback
+
+
+class TabBase:
+    """What every tab is made of: one status line, then the shared widgets, built in one
+    order (issue 13: "each tab reuses one set of widgets for loading, parameters, progress
+    and export").
+
+    A tab sets ``label`` (its title), ``scene`` (its folder in the scene tree) and
+    ``stem`` (the download name before a file is loaded), calls ``super().__init__`` and
+    then, in page order, the builders it needs: :meth:`add_loader` (its ``_read(path,
+    name)`` turns a file into data, ``_loaded(data, name)`` shows it), its own
+    parameters, :meth:`add_device`, :meth:`add_runner` (``_fit(progress, stop)`` works
+    on the run thread, ``_done(result)`` shows the result) and :meth:`add_export`
+    (``shown()``).
+    """
+
+    label = ""
+    scene = ""
+    stem = "object"
+
+    def __init__(self, session: "Session", ui):
+        self.session, self.ui = session, ui
+        self.root = session.client.scene.add_frame(f"/{self.scene}", show_axes=False)
+        self.name = self.stem
+        self.status = Status(session, ui)
+
+    def add_loader(self, label: str) -> Loader:
+        self.loader = Loader(self.session, self.ui, self.status, self._read, self._loaded, label=label)
+        return self.loader
+
+    def add_device(self):
+        self.device = self.ui.add_dropdown("Device", devices(), initial_value="cpu")
+        return self.device
+
+    def add_runner(self, label: str) -> RunPanel:
+        self.runner = RunPanel(self.session, self.ui, self.status, self._fit, self._done, label=label)
+        return self.runner
+
+    def add_export(self, formats=None) -> ExportPanel:
+        self.export = ExportPanel(self.session, self.ui, self.status, self.shown, formats)
+        return self.export
+
+    def guard(self, fn) -> None:
+        """Run ``fn`` (a widget's handler); an exception is shown in the tab, the server carries on."""
+        try:
+            fn()
+        except Exception as exc:  # noqa: BLE001
+            self.status.error(describe_error(exc))
+
+    def shown(self):
+        return None, None, self.name
 
 
 # ---- one browser tab ---------------------------------------------------------------------
@@ -406,9 +502,11 @@ class Session:
             self.frame(obj.control_points.detach().cpu().numpy()[..., :3])
         elif getattr(tab, "points", None) is not None:
             self.frame(tab.points)
+        elif getattr(tab, "grey", None) is not None:
+            tab.frame()  # an image seen from above
 
-    def frame(self, points) -> None:
-        """Point the camera at ``points (N, 3)`` from a three-quarter view."""
+    def frame(self, points, view=(0.9, -1.2, 0.9)) -> None:
+        """Point the camera at ``points (N, 3)`` from ``view`` (a direction; default three-quarter)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if pts.size == 0 or not np.isfinite(pts).all():
             return
@@ -417,7 +515,8 @@ class Session:
         camera = self.client.camera
         if camera._state.update_timestamp == 0.0:
             return  # the browser has not reported its camera yet (still connecting)
-        view = np.array([0.9, -1.2, 0.9])
+        view = np.asarray(view, dtype=np.float64)
+        view = view * (1.75 / np.linalg.norm(view))  # the default's distance: 1.75 diagonals
         right = np.cross(-view, [0.0, 0.0, 1.0])
         right /= np.linalg.norm(right)
         # the panel covers the right of the page: aim right of the object so that it sits left
@@ -436,12 +535,20 @@ class Studio:
     def __init__(self, options: StudioOptions):
         self.options = options
         self.workdir = Workdir(options.workdir)
-        self.tabs = available_tabs()
+        self.tabs: list = []  # filled by the loader thread (see start)
+        self.ready = threading.Event()
+        self.load_error: str | None = None
         self.sessions: dict[int, Session] = {}
         self.server = None
         self._lock = threading.Lock()
 
     def start(self) -> "Studio":
+        """Listen first, then import the fitting code (torch, the capabilities) on a thread.
+
+        The page's code (a few MB of JavaScript) loads in the browser while the
+        capabilities import here; a client that connects before they are in sees a
+        "loading" line, and its tabs are built as soon as they are (:meth:`_connect`).
+        """
         viser = require("viser", "studio", "nurbskit studio")
         self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
@@ -451,6 +558,22 @@ class Studio:
         self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        threading.Thread(target=self._load, name="nurbskit-studio-import", daemon=True).start()
+        return self
+
+    def _load(self) -> None:
+        """Import every tab's capability and builder (the slow part of start-up: torch)."""
+        try:
+            self.tabs = available_tabs()
+        except BaseException as exc:  # noqa: BLE001 - shown in every page; the server keeps serving
+            self.load_error = describe_error(exc)
+        finally:
+            self.ready.set()
+
+    def wait_ready(self, timeout: float | None = None) -> "Studio":
+        """Block until the tabs' code is imported (a test or script that wants them now)."""
+        if not self.ready.wait(timeout):
+            raise TimeoutError(f"the studio's tabs were not ready after {timeout} s")
         return self
 
     @property
@@ -464,6 +587,14 @@ class Studio:
         return f"http://{shown}:{self.port}/"
 
     def _connect(self, client) -> None:
+        # viser runs this on a worker thread: waiting here for the imports holds no one else up
+        if not self.ready.is_set():
+            notice = client.gui.add_markdown("*Loading nurbskit's fitting code ...*")
+            self.ready.wait()
+            notice.remove()
+        if self.load_error is not None:
+            client.gui.add_markdown(f"**Error:** the studio could not load its tabs: {html.escape(self.load_error)}")
+            return
         session = Session(self, client)
         with self._lock:
             self.sessions[client.client_id] = session

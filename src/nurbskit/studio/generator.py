@@ -24,7 +24,7 @@ import torch
 
 from .. import NURBSCurve, NURBSSurface, NURBSVolume
 from ..errors import OptionError
-from .app import ExportPanel, Status, describe_error
+from .app import TabBase
 from .scene import SURFACE_COLOR, SplineView, diagonal
 
 KINDS = ("surface", "curve", "volume")
@@ -102,22 +102,22 @@ def make_object(kind: str, sizes, degrees, knots: str):
     return obj, (nfree if periodic else None)
 
 
-class GeneratorTab:
+class GeneratorTab(TabBase):
     """Create and edit a curve, surface or volume."""
 
     label = "NURBS Generator"
+    scene = "generator"
+    stem = "generated"
 
     def __init__(self, session, ui):
-        self.session = session
+        super().__init__(session, ui)
         scene = session.client.scene
-        self.root = scene.add_frame("/generator", show_axes=False)
         self.lock = threading.RLock()
         self.obj = None
         self.other = None  # the second piece of a split
         self.periodic_free: int | None = None
         self._syncing = False
         self.updates = 0
-        self.status = Status(session, ui)
         self.kind = ui.add_dropdown("Object", KINDS, initial_value="surface")
         self.sizes = ui.add_vector3("Sizes (u, v, w)", (6, 5, 4), min=(2, 2, 2), max=(64, 64, 32), step=1)
         self.degrees = ui.add_vector3("Degrees (u, v, w)", (3, 3, 2), min=(1, 1, 1), max=(7, 7, 7), step=1)
@@ -133,42 +133,42 @@ class GeneratorTab:
         self.split_button = ui.add_button("Split")
         self.display = ui.add_dropdown("Show", ("shaded", "curvature", "normals"), initial_value="shaded")
         self.info = ui.add_markdown("")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.add_export()
         self.view = SplineView(scene, "/generator/object", SURFACE_COLOR)
         self.other_view = SplineView(scene, "/generator/other", (160, 160, 160))
         self.handle = scene.add_transform_controls("/generator/handle", scale=0.25, disable_rotations=True,
                                                    depth_test=False)
 
-        self.create.on_click(lambda e: self._guard(self.rebuild))
-        self.index.on_update(lambda e: self._guard(self._select))
-        self.position.on_update(lambda e: self._guard(self._from_widget))
-        self.weight.on_update(lambda e: self._guard(self._weight))
-        self.insert.on_click(lambda e: self._guard(lambda: self._op("insert")))
-        self.elevate.on_click(lambda e: self._guard(lambda: self._op("elevate")))
-        self.split_button.on_click(lambda e: self._guard(lambda: self._op("split")))
-        self.display.on_update(lambda e: self._guard(self._redisplay))
-        self.handle.on_update(lambda e: self._guard(self._from_handle))
-        self._guard(self.rebuild)
-
-    def _guard(self, fn) -> None:
-        try:
-            fn()
-        except Exception as exc:  # shown in the page; the server carries on
-            self.status.error(describe_error(exc))
+        self.create.on_click(lambda e: self.guard(self.rebuild))
+        self.index.on_update(lambda e: self.guard(self._select))
+        self.position.on_update(lambda e: self.guard(self._from_widget))
+        self.weight.on_update(lambda e: self.guard(self._weight))
+        self.insert.on_click(lambda e: self.guard(lambda: self._op("insert")))
+        self.elevate.on_click(lambda e: self.guard(lambda: self._op("elevate")))
+        self.split_button.on_click(lambda e: self.guard(lambda: self._op("split")))
+        self.display.on_update(lambda e: self.guard(self._redisplay))
+        self.handle.on_update(lambda e: self.guard(self._from_handle))
+        # the first object is built but drawn hidden: the page opens on another tab, and
+        # its first paint need not wait for the surface's shaders (software WebGL: seconds)
+        self.guard(lambda: self.rebuild(show=False))
 
     # ---- building ------------------------------------------------------------------------
-    def rebuild(self) -> None:
+    def rebuild(self, show: bool = True) -> None:
         with self.lock:
             obj, free = make_object(self.kind.value, self.sizes.value, self.degrees.value, self.knots.value)
-            self.set_object(obj, free)
+            self.set_object(obj, free, show=show)
             self.status.info(f"created a {obj.kind} with {tuple(obj.sizes)} control points")
 
-    def set_object(self, obj, periodic_free=None, other=None, frame: bool = True) -> None:
+    def set_object(self, obj, periodic_free=None, other=None, frame: bool = True, show: bool = True) -> None:
+        """Edit ``obj`` from now on; ``show``: bring this tab to the 3-D view (else drawn hidden)."""
         with self.lock:
             self.obj = obj.to(torch.float64).clone()
             self.periodic_free = periodic_free
             self.other = other
-            self.session.focus(self.label)
+            if show:
+                self.session.focus(self.label)
+            else:
+                self.root.visible = False
             self.view.mode = self.display.value
             self.view.clear()
             self.view.draw(self.obj)
@@ -177,7 +177,7 @@ class GeneratorTab:
                 self.other_view.draw(other.to(torch.float64))
             self._describe()
             self._select()
-            if frame:
+            if frame and show:
                 self.session.frame(self.obj.control_points.numpy()[..., :3])
 
     def _describe(self) -> None:

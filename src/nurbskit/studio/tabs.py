@@ -1,11 +1,13 @@
-"""The fitting tabs: Unsupervised, Supervised, Patches, Revolve / Extrude, Volume from drawings.
+"""The fitting tabs: Unsupervised, Supervised, Patches, Revolve / Extrude, Curves from
+images, Volume from drawings.
 
 Each tab is a thin layer over the library's public API: it reads with
 ``nurbskit.io``, samples meshes with ``nurbskit.sample_mesh``, fits with
 ``nurbskit.fit_surface`` / ``nurbskit.fit_patches`` / ``nurbskit.shapes.fit_shape`` /
-``nurbskit.fit_silhouettes``, reports with
-``nurbskit.fit.fit_report``, and draws with :mod:`.scene`. The widgets (loader, run
-panel, export) are the shared ones of :mod:`.app`.
+``nurbskit.curves_from_image`` / ``nurbskit.fit_silhouettes``, reports with
+``nurbskit.fit.fit_report``, and draws with :mod:`.scene`. Every tab is a
+:class:`~.app.TabBase` (status, loader, parameters, run panel, export, in that order);
+the three that fit a point cloud share :class:`CloudTab`.
 """
 
 from __future__ import annotations
@@ -17,12 +19,8 @@ import numpy as np
 import torch
 
 from ..errors import InputError, OptionError
-from .app import ExportPanel, Loader, RunPanel, Status
+from .app import TabBase, iteration_progress, markdown_table, read_upload
 from .scene import RESULT_COLOR, SURFACE_COLOR, SplineView, colormap, diagonal, draw_mesh, draw_points
-
-
-def _devices() -> tuple[str, ...]:
-    return ("cpu", "cuda") if torch.cuda.is_available() else ("cpu",)
 
 
 def _apply_iterations(cfg, iterations: int):
@@ -76,8 +74,7 @@ def _metrics_markdown(report: dict) -> str:
     ]
     if "rms" in report:
         rows.append(("RMS to target", f"{report['rms']:.4g}"))
-    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
-    return "**Metrics**\n\n| | |\n|---|---|\n" + body
+    return markdown_table("Metrics", rows)
 
 
 def _read_cloud(path: Path, name: str, count: int):
@@ -99,51 +96,78 @@ def _read_cloud(path: Path, name: str, count: int):
     return np.asarray(cloud.points, dtype=np.float64), "cloud"
 
 
+class CloudTab(TabBase):
+    """A tab that fits a point cloud, or a mesh Poisson-sampled to ``count`` points.
+
+    A subclass sets ``samples`` (the default count), ``min_points`` and ``purpose`` (for
+    the message when a cloud is too small), and implements :meth:`forget` (drop the
+    last result and its drawing when a new cloud arrives).
+    """
+
+    stem = "cloud"
+    samples = 2000
+    min_points = 4
+    purpose = "a surface fit"
+
+    def __init__(self, session, ui):
+        super().__init__(session, ui)
+        self.points: np.ndarray | None = None
+        self.cloud_handle = None
+        self.count = ui.add_number("Poisson samples of a mesh", self.samples, min=max(10, self.min_points),
+                                   max=200000, step=1)
+        self.add_loader("Load cloud or mesh")
+
+    def _read(self, path: Path, name: str):
+        return _read_cloud(path, name, int(self.count.value))
+
+    def forget(self) -> None:
+        """Drop the last result and its drawing (a new cloud was loaded)."""
+
+    def _loaded(self, data, name: str) -> None:
+        points, what = data
+        if points.shape[0] < self.min_points:
+            raise InputError(f"{name}: {points.shape[0]} points; {self.purpose} needs at least {self.min_points}")
+        self.points, self.name = points, Path(name).stem or self.stem
+        self.session.focus(self.label)
+        self.forget()
+        self.cloud_handle = draw_points(self.session.client.scene, f"/{self.scene}/input", points)
+        self.session.frame(points)
+        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
+
+    def need_points(self) -> np.ndarray:
+        if self.points is None:
+            raise OptionError("load a point cloud or mesh first")
+        return self.points
+
+
 # ---- Unsupervised -----------------------------------------------------------------------
 
-class UnsupervisedTab:
+class UnsupervisedTab(CloudTab):
     """Load a cloud or mesh, choose a pipeline, fit, look at the result."""
 
     label = "Unsupervised"
+    scene = "unsupervised"
 
     def __init__(self, session, ui):
         from ..fit.pipelines import PIPELINES
 
-        self.session = session
-        self.root = session.client.scene.add_frame("/unsupervised", show_axes=False)
-        self.points: np.ndarray | None = None
-        self.name = "cloud"
         self.result = None
-        self.status = Status(session, ui)
-        self.count = ui.add_number("Poisson samples of a mesh", 2000, min=10, max=200000, step=1)
-        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        super().__init__(session, ui)
         names = tuple(k for k, p in PIPELINES.items() if not p.supervised)
         self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="default" if "default" in names else names[0])
         self.ctrl = ui.add_vector2("Control grid", (15, 15), min=(2, 2), max=(64, 64), step=1)
         self.degree = ui.add_vector2("Degree", (3, 3), min=(1, 1), max=(7, 7), step=1)
         self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
         self.weights = ui.add_text("Loss weights (e.g. chamfer=1 laplacian=0.001; blank: the pipeline's)", "")
-        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
+        self.add_device()
         self.show_error = ui.add_checkbox("Colour points by error", True)
-        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.add_runner("Fit")
+        self.add_export()
         self.surface_view = SplineView(session.client.scene, "/unsupervised/surface", RESULT_COLOR)
-        self.cloud_handle = None
 
-    # loading
-    def _read(self, path: Path, name: str):
-        return _read_cloud(path, name, int(self.count.value))
-
-    def _loaded(self, data, name: str) -> None:
-        points, what = data
-        if points.shape[0] < 4:
-            raise InputError(f"{name}: {points.shape[0]} points; a surface fit needs at least 4")
-        self.points, self.name, self.result = points, Path(name).stem or "cloud", None
-        self.session.focus(self.label)
+    def forget(self) -> None:
+        self.result = None
         self.surface_view.clear()
-        self.cloud_handle = draw_points(self.session.client.scene, "/unsupervised/input", points)
-        self.session.frame(points)
-        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
 
     # fitting
     def config(self):
@@ -158,22 +182,12 @@ class UnsupervisedTab:
     def _fit(self, progress, stop):
         import nurbskit
 
-        if self.points is None:
-            raise OptionError("load a point cloud or mesh first")
+        points = self.need_points()
         cfg = self.config()
-        total = max(1, cfg.total_iters)
-        done = [0]
-
-        def callback(p):
-            done[0] += 1
-            progress(min(1.0, done[0] / total), p.loss)
-
         progress(0.0)
-        import torch
-
         # the fit runs where its inputs are: the device choice only moves the points
-        points = torch.as_tensor(self.points, dtype=torch.float64).to(self.device.value)
-        result = nurbskit.fit_surface(points, cfg, callback=callback)
+        points = torch.as_tensor(points, dtype=torch.float64).to(self.device.value)
+        result = nurbskit.fit_surface(points, cfg, callback=iteration_progress(progress, cfg.total_iters))
         from ..fit import fit_report
 
         report = fit_report(result, distances=True)
@@ -203,56 +217,50 @@ def build_unsupervised(session, ui):
 
 # ---- Supervised -------------------------------------------------------------------------
 
-class SupervisedTab:
+class SupervisedTab(TabBase):
     """Load a NURBS (nurbskit/geomdl JSON, .ctrlpts + .weights, .3dm), fit it, compare."""
 
     label = "Supervised"
+    scene = "supervised"
+    stem = "target"
 
     def __init__(self, session, ui):
         from ..fit.pipelines import PIPELINES
 
-        self.session = session
-        self.root = session.client.scene.add_frame("/supervised", show_axes=False)
+        super().__init__(session, ui)
         self.target = None
         self.result = None
-        self.name = "target"
-        self.status = Status(session, ui)
         ui.add_markdown("`.ctrlpts` files take sizes and degrees below (or a side `<file>.json`); "
                         "a `.weights` file beside one in the workdir is read with it.")
         self.sizes = ui.add_text("Sizes of a .ctrlpts grid", "")
         self.degrees = ui.add_text("Degrees of a .ctrlpts grid", "3 3")
         self.weights = None  # from an uploaded .weights file, for the next uploaded .ctrlpts
         self.weights_upload = ui.add_upload_button("Upload .weights (for an uploaded .ctrlpts)")
-        self.weights_upload.on_upload(lambda event: self.loader._guard(self._weights_uploaded))
+        self.weights_upload.on_upload(lambda event: self.guard(self._weights_uploaded))
         session.upload_status[self.weights_upload._impl.uuid] = self.status
-        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load NURBS")
+        self.add_loader("Load NURBS")
         names = tuple(k for k, p in PIPELINES.items() if p.supervised)
         self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="SC" if "SC" in names else names[0])
         self.resolution = ui.add_vector2("Target grid", (32, 32), min=(2, 2), max=(256, 256), step=1)
         self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
-        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
-        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.add_device()
+        self.add_runner("Fit")
+        self.add_export()
         scene = session.client.scene
         self.truth_view = SplineView(scene, "/supervised/truth", SURFACE_COLOR)
         self.result_view = SplineView(scene, "/supervised/result", RESULT_COLOR)
 
     def _weights_uploaded(self) -> None:
         import nurbskit
-        from .workdir import check_upload
 
-        file = self.weights_upload.value
-        check_upload(file.name, file.content, self.session.options.max_upload_bytes)
-        tmp = self.session.workdir.scratch(".weights")
-        try:
-            tmp.write_bytes(file.content)
+        def read(path: Path, name: str):
             try:
-                self.weights = np.asarray(nurbskit.io.read_weights(tmp), dtype=np.float64)
+                return np.asarray(nurbskit.io.read_weights(path), dtype=np.float64)
             except Exception as exc:  # noqa: BLE001
-                raise InputError(str(exc).replace(str(tmp), Path(file.name).name)) from None
-        finally:
-            tmp.unlink(missing_ok=True)
-        self.status.info(f"{Path(file.name).name}: {self.weights.size} weights, used by the next .ctrlpts upload")
+                raise InputError(str(exc).replace(str(path), name)) from None
+
+        self.weights, name = read_upload(self.session, self.weights_upload.value, read)
+        self.status.info(f"{name}: {self.weights.size} weights, used by the next .ctrlpts upload")
 
     def _read(self, path: Path, name: str):
         import nurbskit
@@ -294,16 +302,9 @@ class SupervisedTab:
         cfg = dataclasses.replace(get_pipeline(self.pipeline.value),
                                   resolution=tuple(int(x) for x in self.resolution.value))
         cfg = _apply_iterations(cfg, int(self.iters.value)).validate()
-        total = max(1, cfg.total_iters)
-        done = [0]
-
-        def callback(p):
-            done[0] += 1
-            progress(min(1.0, done[0] / total), p.loss)
-
         progress(0.0)
         result = nurbskit.fit_surface(config=cfg, target_surface=self.target.to(device=self.device.value),
-                                      callback=callback)
+                                      callback=iteration_progress(progress, cfg.total_iters))
         return result, fit_report(result)
 
     def _done(self, out) -> None:
@@ -359,8 +360,7 @@ def _patches_markdown(result) -> str:
     ]
     if result.timings:
         rows.append(("seconds", f"{sum(float(v) for v in result.timings.values()):.2f}"))
-    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
-    return "**Metrics**\n\n| | |\n|---|---|\n" + body
+    return markdown_table("Metrics", rows)
 
 
 def combined_mesh(result) -> tuple[np.ndarray, np.ndarray]:
@@ -376,49 +376,37 @@ def combined_mesh(result) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(verts), np.concatenate(faces)
 
 
-class PatchesTab:
+class PatchesTab(CloudTab):
     """Load a cloud or mesh, fit a few trimmed NURBS patches (``nurbskit.fit_patches``)."""
 
     label = "Patches"
+    scene = "patches"
+    samples = 3000
+    min_points = 20
+    purpose = "multi-patch fitting"
 
     def __init__(self, session, ui):
-        self.session = session
-        self.root = session.client.scene.add_frame("/patches", show_axes=False)
-        self.points: np.ndarray | None = None
-        self.name = "cloud"
         self.result = None
         self.handles: list = []
-        self.status = Status(session, ui)
-        self.count = ui.add_number("Poisson samples of a mesh", 3000, min=20, max=200000, step=1)
-        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        super().__init__(session, ui)
         self.eps = ui.add_number("eps (fraction of the diagonal)", 0.01, min=1e-4, max=0.5, step=1e-4)
         self.weights = ui.add_vector3("Weights (fidelity, simplicity, coverage)", (0.3, 0.4, 0.3),
                                       min=(0.0, 0.0, 0.0), max=(10.0, 10.0, 10.0), step=0.05)
         self.max_ctrl = ui.add_number("Max control grid per patch", 12, min=4, max=64, step=1)
         self.final_iters = ui.add_number("Refinement iterations per final patch", 15, min=0, max=1000, step=1)
-        self.device = ui.add_dropdown("Device", _devices(), initial_value="cpu")
+        self.add_device()
         self.show_points = ui.add_checkbox("Show the input points", True)
-        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit patches")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
-
-    def _read(self, path: Path, name: str):
-        return _read_cloud(path, name, int(self.count.value))
+        self.add_runner("Fit patches")
+        self.add_export()
 
     def _clear(self) -> None:
         for h in self.handles:
             h.remove()
         self.handles = []
 
-    def _loaded(self, data, name: str) -> None:
-        points, what = data
-        if points.shape[0] < 20:
-            raise InputError(f"{name}: {points.shape[0]} points; multi-patch fitting needs at least 20")
-        self.points, self.name, self.result = points, Path(name).stem or "cloud", None
-        self.session.focus(self.label)
+    def forget(self) -> None:
+        self.result = None
         self._clear()
-        self.handles.append(draw_points(self.session.client.scene, "/patches/input", points))
-        self.session.frame(points)
-        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
 
     def config(self):
         from ..patches import PatchConfig
@@ -431,8 +419,7 @@ class PatchesTab:
     def _fit(self, progress, stop):
         import nurbskit
 
-        if self.points is None:
-            raise OptionError("load a point cloud or mesh first")
+        points = self.need_points()
         cfg = self.config()
         progress(0.0)
 
@@ -440,7 +427,7 @@ class PatchesTab:
             # the stages report their own counts; the bar shows the share of the current one
             progress(min(0.99, done / max(1, total)))
 
-        return nurbskit.fit_patches(self.points, normals=None, config=cfg, progress=report)
+        return nurbskit.fit_patches(points, normals=None, config=cfg, progress=report)
 
     def _done(self, result) -> None:
         self.result = result
@@ -505,68 +492,54 @@ def _shape_markdown(fit) -> str:
     for k, v in (fit.candidates or {}).items():
         if isinstance(v, (int, float)):
             rows.append((f"candidate {k}: mean distance", f"{v:.3g} of diag."))
-    body = "\n".join(f"| {k} | {v} |" for k, v in rows)
-    return "**Report**\n\n| | |\n|---|---|\n" + body + (f"\n\n{fit.reason}" if fit.reason else "")
+    return markdown_table("Report", rows) + (f"\n\n{fit.reason}" if fit.reason else "")
 
 
-class ShapeTab:
+class ShapeTab(CloudTab):
     """Load a cloud or mesh, fit an exact surface of revolution or extrusion (``fit_shape``)."""
 
     label = "Revolve / Extrude"
+    scene = "shape"
+    min_points = 30
+    purpose = "a shape fit"
 
     def __init__(self, session, ui):
         from ..shapes import KINDS
 
-        self.session = session
-        self.root = session.client.scene.add_frame("/shape", show_axes=False)
-        self.points: np.ndarray | None = None
-        self.name = "cloud"
         self.fit = None
         self.axis_handle = None
-        self.status = Status(session, ui)
-        self.count = ui.add_number("Poisson samples of a mesh", 2000, min=30, max=200000, step=1)
-        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load cloud or mesh")
+        super().__init__(session, ui)
         kinds = ("auto",) + tuple(k for k in KINDS if k != "auto")
         self.kind = ui.add_dropdown("Kind", kinds, initial_value="auto")
         self.iters = ui.add_number("Refinement iterations", 30, min=0, max=1000, step=1)
-        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit shape")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
+        self.add_runner("Fit shape")
+        self.add_export()
         self.surface_view = SplineView(session.client.scene, "/shape/surface", RESULT_COLOR)
 
-    def _read(self, path: Path, name: str):
-        return _read_cloud(path, name, int(self.count.value))
-
-    def _loaded(self, data, name: str) -> None:
-        points, what = data
-        if points.shape[0] < 30:
-            raise InputError(f"{name}: {points.shape[0]} points; a shape fit needs at least 30")
-        self.points, self.name, self.fit = points, Path(name).stem or "cloud", None
-        self.session.focus(self.label)
-        self.surface_view.clear()
+    def _drop_axis(self) -> None:
         if self.axis_handle is not None:
             self.axis_handle.remove()
             self.axis_handle = None
-        draw_points(self.session.client.scene, "/shape/input", points)
-        self.session.frame(points)
-        self.status.info(f"loaded {name}: {points.shape[0]:,} points ({what})")
+
+    def forget(self) -> None:
+        self.fit = None
+        self.surface_view.clear()
+        self._drop_axis()
 
     def _fit(self, progress, stop):
         from ..shapes import fit_shape
 
-        if self.points is None:
-            raise OptionError("load a point cloud or mesh first")
+        points = self.need_points()
         progress(0.0)
         iters = int(self.iters.value)
-        return fit_shape(self.points, self.kind.value, refine=iters > 0, iterations=max(iters, 1))
+        return fit_shape(points, self.kind.value, refine=iters > 0, iterations=max(iters, 1))
 
     def _done(self, fit) -> None:
         self.fit = fit
         self.session.focus(self.label)
         self.surface_view.shape_key = None
         self.surface_view.draw(fit.surface.detach().to(torch.float64))
-        if self.axis_handle is not None:
-            self.axis_handle.remove()
-            self.axis_handle = None
+        self._drop_axis()
         seg = axis_segment(fit, self.points)
         if seg is not None:
             self.axis_handle = self.session.client.scene.add_line_segments(
@@ -584,29 +557,229 @@ def build_shape(session, ui):
     return ShapeTab(session, ui)
 
 
+# ---- Curves from images ------------------------------------------------------------------
+
+CURVE_COLOR = (230, 25, 75)  # the red of `nurbskit curves`' overlay and SVG
+CONTROL_COLOR = (0, 90, 200)
+
+
+def image_to_world(xy: np.ndarray) -> np.ndarray:
+    """Pixel coordinates ``(..., 2)`` (x right, y down) -> scene points ``(..., 3)`` in z = 0.
+
+    Convention: y is negated so that the image reads upright from above in the studio's
+    z-up scene; one scene unit is one pixel.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    return np.stack([xy[..., 0], -xy[..., 1], np.zeros(xy.shape[:-1])], -1)
+
+
+def curve_segments(curves: list, spacing: float = 1.0) -> np.ndarray:
+    """Every curve as a polyline of segments ``(K, 2, 3)`` in the z = 0 plane (scene coordinates)."""
+    from ..curves.synthetic import dense_samples
+
+    segs = []
+    for c in curves:
+        pts = image_to_world(dense_samples(c, spacing))
+        segs.append(np.stack([pts[:-1], pts[1:]], 1))
+    return np.concatenate(segs) if segs else np.zeros((0, 2, 3))
+
+
+def method_options() -> dict[str, object]:
+    """The keyword arguments of ``curves_from_image`` beyond the classic ones (e.g. ``mode``,
+    which the network method takes), with their defaults: the tab offers what the API has."""
+    import inspect
+
+    from ..curves.api import curves_from_image
+
+    known = {"image", "method", "tolerance", "refine", "refine_iterations"}
+    out = {}
+    for name, p in inspect.signature(curves_from_image).parameters.items():
+        if name not in known and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+            out[name] = None if p.default is p.empty else p.default
+    return out
+
+
+def _curves_markdown(report: dict) -> str:
+    c = report["chamfer"]
+    rows = [
+        ("image", f"{report['size'][0]} x {report['size'][1]} px, {report['polarity']}"),
+        ("method", report["method"]),
+        ("curves", report["curves"]),
+        ("control points", report["control_points"]),
+        ("Chamfer curves -> ink", "-" if c is None else f"{c['curves_to_ink']:.3f} px"),
+        ("Chamfer ink -> curves", "-" if c is None else f"{c['ink_to_curves']:.3f} px"),
+        ("seconds", f"{report['seconds']:.2f}"),
+    ]
+    return markdown_table("Report", rows)
+
+
+class CurvesTab(TabBase):
+    """An image (a drawing) -> B-spline curves (``nurbskit.curves_from_image``), drawn over it."""
+
+    label = "Curves from images"
+    scene = "curves"
+    stem = "image"
+
+    def __init__(self, session, ui):
+        from ..curves.api import METHODS
+
+        super().__init__(session, ui)
+        self.grey: np.ndarray | None = None
+        self.curves: list | None = None
+        self.report: dict | None = None
+        self.handles: dict[str, object] = {}
+        self.add_loader("Load image")
+        self.method = ui.add_dropdown("Method", tuple(METHODS), initial_value=METHODS[0])
+        # options the API grows (the network method's mode): offered as text, passed when set
+        self.options = {name: ui.add_text(f"{name} (method option; blank: the default)",
+                                          "" if default is None else str(default))
+                        for name, default in method_options().items()}
+        self.tolerance = ui.add_number("Tolerance (pixels)", 1.0, min=0.01, max=1000.0, step=0.01)
+        self.refine = ui.add_checkbox("Refine (Chamfer against the ink, L-BFGS)", False)
+        self.refine_iters = ui.add_number("Refinement iterations", 20, min=1, max=1000, step=1)
+        self.add_runner("Find curves")
+        self.add_export({
+            "curves.json": ("-curves.json", self._write_json),
+            "curves.svg": ("-curves.svg", self._write_svg),
+        })
+
+    # loading
+    def _read(self, path: Path, name: str):
+        from ..curves.api import read_image
+
+        try:
+            return read_image(path)  # PIL decides by the content; its size limit applies
+        except InputError as exc:
+            raise InputError(str(exc).replace(str(path), name)) from None
+
+    def _loaded(self, grey, name: str) -> None:
+        self.grey, self.name, self.curves, self.report = grey, Path(name).stem or self.stem, None, None
+        self.session.focus(self.label)
+        self._clear()
+        h, w = grey.shape
+        rgb = np.repeat(np.round(255 * np.clip(grey, 0, 1)).astype(np.uint8)[..., None], 3, -1)
+        # the image plane's own frame is x right, y down (viser's image convention); turned
+        # half a turn about x it lands on image_to_world's (x, -y)
+        self.handles["image"] = self.session.client.scene.add_image(
+            f"/{self.scene}/image", rgb, float(w), float(h), format="png", position=(w / 2, -h / 2, -0.01),
+            wxyz=(0.0, 1.0, 0.0, 0.0), cast_shadow=False, receive_shadow=False)
+        # the image's edge, so that a white drawing stands out from the white background
+        corners = image_to_world(np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h], [0.0, 0.0]]))
+        self.handles["border"] = self.session.client.scene.add_line_segments(
+            f"/{self.scene}/border", np.stack([corners[:-1], corners[1:]], 1).astype(np.float32), (150, 150, 150),
+            thickness=1.5, thickness_units="screen")
+        self.frame()
+        self.status.info(f"loaded {name}: {w} x {h} pixels")
+
+    def _clear(self) -> None:
+        for h in self.handles.values():
+            h.remove()
+        self.handles = {}
+
+    def frame(self) -> None:
+        h, w = self.grey.shape
+        self.session.frame(image_to_world(np.array([[0.0, 0.0], [w, h]])), view=(0.0, -0.35, 1.0))
+
+    # running
+    def kwargs(self) -> dict:
+        out = {"method": self.method.value, "tolerance": float(self.tolerance.value),
+               "refine": bool(self.refine.value), "refine_iterations": int(self.refine_iters.value)}
+        for name, box in self.options.items():
+            if box.value.strip():
+                out[name] = box.value.strip()
+        return out
+
+    def _fit(self, progress, stop):
+        import time
+
+        import nurbskit
+        from ..curves.classic import chamfer_to_ink, ink_mask
+
+        if self.grey is None:
+            raise OptionError("load an image first")
+        kwargs = self.kwargs()
+        progress(0.0)
+        t0 = time.perf_counter()
+        curves = nurbskit.curves_from_image(self.grey, **kwargs)
+        seconds = time.perf_counter() - t0
+        progress(0.9)  # raises Stopped when Stop was pressed meanwhile (the call itself has no callback)
+        ink, inverted = ink_mask(self.grey, self.name)
+        h, w = self.grey.shape
+        return curves, {
+            "size": (w, h), "method": kwargs["method"], "curves": len(curves),
+            "control_points": sum(int(c.control_points.shape[0]) for c in curves),
+            "polarity": "light on dark" if inverted else "dark on light",
+            "chamfer": chamfer_to_ink(curves, ink) if curves else None, "seconds": seconds,
+        }
+
+    def _done(self, out) -> None:
+        curves, report = out
+        self.curves, self.report = curves, report
+        self.session.focus(self.label)
+        scene = self.session.client.scene
+        for key in ("curves", "control"):
+            if key in self.handles:
+                self.handles.pop(key).remove()
+        if curves:
+            self.handles["curves"] = scene.add_line_segments(
+                f"/{self.scene}/curves", curve_segments(curves).astype(np.float32), CURVE_COLOR,
+                thickness=3.0, thickness_units="screen")
+            cp = image_to_world(np.concatenate([c.control_points.detach().cpu().numpy() for c in curves]))
+            size = 0.012 * float(np.hypot(*self.grey.shape))
+            self.handles["control"] = draw_points(scene, f"/{self.scene}/control", cp + [0.0, 0.0, size],
+                                                  np.tile(np.array(CONTROL_COLOR, np.uint8), (len(cp), 1)), size)
+        self.runner.metrics.content = _curves_markdown(report)
+        self.status.info(f"found {len(curves)} curve(s)")
+
+    # export
+    def _need_curves(self) -> list:
+        if self.curves is None:
+            raise OptionError("nothing to export yet; load an image and find its curves first")
+        return self.curves
+
+    def _write_json(self, path: Path) -> None:
+        from ..cli.curves_command import write_curves_json
+
+        curves = self._need_curves()
+        h, w = self.grey.shape
+        write_curves_json(path, curves, (w, h))
+
+    def _write_svg(self, path: Path) -> None:
+        from ..cli.curves_command import write_svg
+
+        write_svg(path, self.grey, self._need_curves())
+
+    def shown(self):
+        return None, None, self.name
+
+
+def build_curves(session, ui):
+    return CurvesTab(session, ui)
+
+
 # ---- Volume from drawings ------------------------------------------------------------------
 
-class VolumeTab:
+class VolumeTab(TabBase):
     """Three drawings (front, left, top) -> a NURBS volume and its isosurface."""
 
     label = "Volume from drawings"
+    scene = "volume"
+    stem = "volume"
 
     def __init__(self, session, ui):
-        self.session = session
-        self.root = session.client.scene.add_frame("/volume", show_axes=False)
+        super().__init__(session, ui)
         self.drawings: dict[str, torch.Tensor] = {}
         self.fit = None
-        self.status = Status(session, ui)
         self.which = ui.add_dropdown("Drawing to load", ("front", "left", "top"), initial_value="front")
-        self.loader = Loader(session, ui, self.status, self._read, self._loaded, label="Load drawing")
+        self.add_loader("Load drawing")
         self.sample = ui.add_button("Use the paper's drawings")
         self.control = ui.add_number("Control values per axis", 20, min=4, max=80, step=1)
         self.grid = ui.add_number("Cost grid per axis", 20, min=4, max=128, step=1)
         self.iters = ui.add_number("Iterations", 60, min=0, max=2000, step=1)
         self.loss = ui.add_dropdown("Cost", ("paper", "silhouette"), initial_value="paper")
-        self.runner = RunPanel(session, ui, self.status, self._fit, self._done, label="Fit volume")
-        self.export = ExportPanel(session, ui, self.status, self.shown)
-        self.sample.on_click(lambda event: self._paper())
+        self.add_runner("Fit volume")
+        self.add_export()
+        self.sample.on_click(lambda event: self.guard(self._paper))
 
     def _read(self, path: Path, name: str):
         from ..volume import load_drawing
@@ -656,8 +829,8 @@ class VolumeTab:
             return
         draw_mesh(self.session.client.scene, "/volume/mesh", fit.mesh.vertices, fit.mesh.faces)
         self.session.frame(fit.mesh.vertices)
-        rows = "\n".join(f"| IoU {k} | {v:.3f} |" for k, v in fit.iou.items())
-        self.runner.metrics.content = (f"**Metrics**\n\n| | |\n|---|---|\n| iterations | {fit.iterations} |\n{rows}")
+        self.runner.metrics.content = markdown_table(
+            "Metrics", [("iterations", fit.iterations)] + [(f"IoU {k}", f"{v:.3f}") for k, v in fit.iou.items()])
         self.status.info(f"volume fitted: {len(fit.mesh.faces):,} triangles")
 
     def shown(self):

@@ -24,7 +24,7 @@ _EXTENSION = re.compile(r"^\.[A-Za-z0-9]{1,8}$")
 # What the file list offers: everything nurbskit reads (points, meshes, NURBS, drawings).
 LISTED = {
     ".ply", ".off", ".noff", ".obj", ".stl", ".xyz", ".txt", ".pts", ".xyzc", ".pcd", ".npy", ".npz",
-    ".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm", ".png", ".jpg", ".jpeg",
+    ".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm", ".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff",
 }
 
 
