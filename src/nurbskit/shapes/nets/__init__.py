@@ -9,7 +9,8 @@ See ``docs/shapes_nets.md``.
 """
 
 from .data import KINDS, N_CTRL, SurfaceLayer, make_batch, normalise, random_profiles, sample_clouds, silhouettes
+from .guess import guess_surface, initial_guess, load_model, plane_basis
 from .models import PointNetEncoder, ProfileNet, SilhouetteCNN, build_model
 
 __all__ = ["KINDS", "N_CTRL", "SurfaceLayer", "make_batch", "normalise", "random_profiles", "sample_clouds",
-           "silhouettes", "PointNetEncoder", "ProfileNet", "SilhouetteCNN", "build_model"]
+           "silhouettes", "initial_guess", "guess_surface", "load_model", "plane_basis", "PointNetEncoder", "ProfileNet", "SilhouetteCNN", "build_model"]

@@ -112,7 +112,7 @@ class SurfaceLayer(nn.Module):
                 for k in range(base.numel())]
         matrix = torch.stack(cols, -1)  # (3 S, n_outputs)
         # the map is homogeneous (axis through the origin): f(base) = matrix @ base exactly
-        if not torch.allclose(matrix @ base, f0, rtol=0, atol=1e-10):
+        if float((matrix @ base - f0).abs().max()) > 1e-10:
             raise NurbskitError("internal: the surface is not linear in the profile (constructor changed?)")
         self.register_buffer("matrix", matrix, persistent=False)  # float64; cast per call
         self.register_buffer("params", params, persistent=False)
