@@ -48,12 +48,12 @@ SEARCH_POINTS = 160  # points per candidate direction in the search
 def plane_basis(direction: Tensor) -> tuple[Tensor, Tensor]:
     """The contract's in-plane unit vectors ``(e1, e2)`` for ``direction (3,)``.
 
-    ``nurbskit.shapes.plane_basis`` when the shape fitter has it (the contract's owner),
+    ``nurbskit.shapes.init.plane_basis`` when the shape fitter has it (the contract's owner),
     else the same rule here: ``e1`` the x axis projected onto the plane (the y axis when
     ``|d_x| > 0.9``), normalised; ``e2 = d x e1``.
     """
     try:
-        from .. import plane_basis as owner  # noqa: PLC0415 - revgeo3's, once merged
+        from ..init import plane_basis as owner  # the shape fitter's (the contract's owner), once merged
     except ImportError:
         owner = None
     if owner is not None:
