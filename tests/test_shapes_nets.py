@@ -181,20 +181,22 @@ def test_the_points_revolution_model_is_shipped():
 
 @pytest.mark.parametrize("kind,input", SHIPPED)
 def test_shipped_weights_predict_within_the_benchmarked_error(kind, input):
-    """The bound: the mean input-to-surface distance the benchmark measured for this model on its
-    held-out set (benchmarks/results/shapes_nets.json, canonical frame), times 1.5 (a 16-cloud
-    batch is noisier than the benchmark's set)."""
+    """Bound: the mean input-to-surface distance (% of the diagonal) that
+    benchmarks/bench_shapes_nets.py measured for this model on 100 held-out canonical clouds
+    (results/shapes_nets.json, row "network, canonical"), times 1.5: this fixed batch has 8
+    clouds (a noisier mean), 600 points, noise drawn in [0, 0.5 %]. Same metric: true
+    projection onto the exact surface (nurbskit.metrics.surface_distances)."""
+    from nurbskit.metrics import surface_distances
+
     rows = json.loads(RESULTS.read_text())["rows"]
     measured = next(r for r in rows if r["model"] == model_name(kind, input) and r["method"] == "network, canonical")
     model = load_model(kind, input)
-    batch = make_batch(batch_generator(123, 0), 16, kind, 1000, images=input == "image", max_noise=0.005)
+    batch = make_batch(batch_generator(123, 0), 8, kind, 600, images=input == "image", max_noise=0.005)
     with torch.no_grad():
-        coords = model(batch["images"] if input == "image" else batch["points"])
-        surf = model.surface_points(coords)
-    # input to generated surface, as a fraction of each normalised cloud's diagonal
-    d = torch.cdist(batch["points"], surf).amin(-1).mean(-1)
-    diag = (batch["points"].amax(1) - batch["points"].amin(1)).norm(dim=-1)
-    assert float((d / diag).mean()) < 1.5 * measured["to_surface_mean_pct"] / 100
+        coords = model(batch["images"] if input == "image" else batch["points"]).double()
+    means = [surface_distances(exact_surface(kind, coords[b]), batch["points"][b].double(), 32)["to_surface_mean"]
+             for b in range(8)]
+    assert 100 * sum(means) / 8 < 1.5 * measured["to_surface_mean_pct"]
 
 
 def test_frames_follow_the_contracts_plane_basis():
