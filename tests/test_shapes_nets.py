@@ -199,6 +199,19 @@ def test_shipped_weights_predict_within_the_benchmarked_error(kind, input):
     assert 100 * sum(means) / 8 < 1.5 * measured["to_surface_mean_pct"]
 
 
+def test_search_score_is_the_training_chamfer():
+    from nurbskit.losses import chamfer_distance
+    from nurbskit.shapes.nets.guess import predict_canonical
+
+    torch.manual_seed(0)
+    model = build_model("revolution", "points").eval()
+    clouds = make_batch(_g(13), 3, "revolution", 100)["points"]
+    coords, score = predict_canonical(model, clouds)
+    with torch.no_grad():
+        want = chamfer_distance(clouds, model.surface_points(coords.float()))
+    assert_close(score, want.double(), atol=1e-6)
+
+
 def test_frames_follow_the_contracts_plane_basis():
     dirs = torch.nn.functional.normalize(torch.randn(20, 3, generator=_g(12), dtype=F64), dim=-1)
     dirs[0] = torch.tensor([0.95, 0.1, math.sqrt(1 - 0.95**2 - 0.01)], dtype=F64)

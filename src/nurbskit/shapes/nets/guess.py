@@ -88,7 +88,7 @@ def predict_canonical(model, clouds: Tensor) -> tuple[Tensor, Tensor]:
     ``chamfer`` is :func:`nurbskit.losses.chamfer_distance`'s (the training loss) between each
     cloud and its generated surface, from the core's neighbour search run on one thread:
     the search calls it for dozens of small clouds, where a thread pool per query costs
-    more than the query (measured 6x on this machine).
+    more than the query (about 5x slower with all cores on this loaded machine, measured).
     """
     with torch.no_grad():
         x = clouds.to(torch.float32)
