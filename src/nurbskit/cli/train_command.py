@@ -26,6 +26,7 @@ from ._options import int_in, number_in
 
 # Modules that add a ``nurbskit train <model>`` sub-command (``register_train(subparsers)``).
 TRAINERS: tuple[str, ...] = (
+    "nurbskit.shapes.nets.training",
 )
 
 
@@ -88,7 +89,7 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     if args.threads:
         torch.set_num_threads(args.threads)
     meta = dict(meta, command="nurbskit " + " ".join(shlex.quote(a) for a in sys.argv[1:] if a != "--quiet"),
-                torch=torch.__version__)
+                torch=str(torch.__version__))  # TorchVersion is not plain data: weights_only loads refuse it
     bar = None
     if not args.quiet:
         from tqdm import tqdm
