@@ -426,14 +426,18 @@ def _is_mesh(obj) -> bool:
     return hasattr(obj, "vertices") and hasattr(obj, "faces") and not isinstance(obj, (TensorSpline, TrimmedSurface))
 
 
-def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE):
+def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE, analytic: bool = True):
     """An OCC shape for a nurbskit object or a list of them.
 
     NURBSSurface / TrimmedSurface -> face; NURBSCurve -> edge; a mesh (anything with
     ``vertices (V, 3)`` and ``faces (F, 3)``, such as ``nurbskit volume``'s) -> solid;
+    :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` -> a face on
+    OCC's surface of revolution / extrusion (``analytic=False``: on their exact NURBS);
     a list -> a compound whose faces are sewn into shells where neighbouring patches
     share edges within ``sew_tolerance`` (``None``: no sewing).
     """
+    from .analytic import is_swept, swept_face
+
     ocp()
     from OCP.BRep import BRep_Builder
     from OCP.TopoDS import TopoDS_Compound
@@ -445,6 +449,8 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
             shapes.append(mesh_solid(*item, tolerance=tolerance))
         elif _is_mesh(item):
             shapes.append(mesh_solid(item.vertices, item.faces, tolerance=tolerance))
+        elif is_swept(item):
+            faces.append(swept_face(item, tolerance) if analytic else face_of(item.to_nurbs(), tolerance))
         elif isinstance(item, TrimmedSurface) or getattr(item, "kind", None) == "surface":
             faces.append(face_of(item, tolerance))
         elif getattr(item, "kind", None) == "curve":
