@@ -298,7 +298,6 @@ def face_of(obj, tolerance: float = TOLERANCE):
     """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
     ocp()
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
-    from OCP.ShapeFix import ShapeFix_Face
 
     trimmed = obj if isinstance(obj, TrimmedSurface) else TrimmedSurface(obj, [])
     geom = surface_to_occ(trimmed.surface)
@@ -331,10 +330,10 @@ def face_of(obj, tolerance: float = TOLERANCE):
             maker.Add(w)
     if not maker.IsDone():
         raise NurbskitError(f"OpenCASCADE could not make a trimmed face (error {maker.Error()})")
-    face = maker.Face()
-    fixer = ShapeFix_Face(face)
-    fixer.FixOrientation()  # only if OCC sees a loop the wrong way round (it should not)
-    return fixer.Face()
+    # no ShapeFix_Face::FixOrientation: TrimLoop orients outer loops counter-clockwise and
+    # holes clockwise, which is what OCC expects, and the check after writing (its
+    # BRepCheck_Face::OrientationOfWires) refuses a file where that went wrong
+    return maker.Face()
 
 
 def _surface_size(surface) -> float:
