@@ -127,7 +127,8 @@ def shape_outputs(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("shapes")
     out = {}
-    for kind, cloud in (("revolution", vase_cloud(600, 0.0, 4, angle=4.0)), ("extrusion", extrusion_cloud(600, 0.0, 5))):
+    clouds = {"revolution": vase_cloud(600, 0.0, 4, angle=4.0), "extrusion": extrusion_cloud(600, 0.0, 5)}
+    for kind, cloud in clouds.items():
         src = root / f"{kind}.npy"
         np.save(src, cloud.points.numpy())
         assert main(["shape", str(src), "--kind", kind, "--iters", "0", "--no-figures", "--out", str(root / kind)]) == 0

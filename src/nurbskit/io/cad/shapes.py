@@ -3,13 +3,16 @@ shells, triangulated solids, and the nurbskit objects found in any shape.
 
 Convention:
     A :class:`~nurbskit.core.trim.TrimmedSurface` becomes one face on its surface. Each
-    trimming loop (a closed polyline in (u, v)) becomes one closed edge whose curve on
-    the surface is the polyline itself (a degree-1 ``Geom2d_BSplineCurve`` through the
-    loop's points, parameter = cumulative chord length in (u, v)), and its 3-D curve is the
-    exact image of that polyline: along a straight (u, v) segment the surface point is a polynomial of
-    degree ``p + q`` (homogeneous coordinates) within a knot span, so the 3-D curve is a
-    rational B-spline of that degree, computed by :func:`loop_curve_3d` (no
-    approximation, unlike OCC's ``BRepLib::BuildCurves3d``). The outer loop runs
+    trimming loop (a closed polyline in (u, v)) becomes a wire of edges of
+    ``EDGE_SEGMENTS`` polyline segments (why: at ``EDGE_SEGMENTS``); an edge's curve on
+    the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
+    parameter = cumulative chord length in (u, v) along the loop), and its 3-D curve is
+    its piece of the exact image of the polyline: along a straight (u, v) segment the
+    surface point is a polynomial of degree ``p + q`` (homogeneous coordinates) within a
+    knot span, so the 3-D curve is a rational B-spline of that degree, computed by
+    :func:`loop_curve_3d` (no approximation, unlike OCC's ``BRepLib::BuildCurves3d``).
+    A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
+    face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
     kept region is on the left of every loop. A surface without loops is bounded by its
     parameter domain (its natural boundary).
