@@ -220,8 +220,9 @@ def _bspline_curve_3d(poles, weights, flat, degree):
 
     knots, mults = knots_and_multiplicities(flat)
     arr = Array1_gp_Pnt(1, len(poles))
-    for i, (x, y, z) in enumerate(poles.tolist(), 1):
-        arr.SetValue(i, gp_Pnt(x, y, z))
+    set_pole = arr.SetValue  # hot: hundreds of poles per loop
+    for i, xyz in enumerate(poles.tolist(), 1):
+        set_pole(i, gp_Pnt(*xyz))
     if weights is None:
         return Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
     return Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"), _array1(mults, "int"),
@@ -252,8 +253,9 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
 
     def polyline(i0: int, i1: int):  # points i0..i1 as a degree-1 B-spline (exact: no knot insertion)
         poles2d = Array1_gp_Pnt2d(1, i1 - i0 + 1)
-        for i, (u, v) in enumerate(uv[i0:i1 + 1].tolist(), 1):
-            poles2d.SetValue(i, gp_Pnt2d(u, v))
+        set_pole = poles2d.SetValue
+        for i, uv_i in enumerate(uv[i0:i1 + 1].tolist(), 1):
+            set_pole(i, gp_Pnt2d(*uv_i))
         mult = np.ones(i1 - i0 + 1, dtype=int)
         mult[0] = mult[-1] = 2
         return Geom2d_BSplineCurve(poles2d, _array1(t[i0:i1 + 1], "float"), _array1(mult, "int"), 1, False)
