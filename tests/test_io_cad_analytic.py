@@ -66,7 +66,16 @@ def _same_point_set(exact, back):
     assert _distance(_samples(back, seed=1), exact) <= 1e-9 * diag
 
 
+def _half_circle() -> nurbskit.NURBSCurve:
+    """Pole to pole in the xz-plane (rational quadratic, exact): revolved about z, the unit sphere."""
+    w = math.sqrt(0.5)
+    cp = torch.tensor([[0, 0, -1], [1, 0, -1], [1, 0, 0], [1, 0, 1], [0, 0, 1]], dtype=torch.float64)
+    return nurbskit.NURBSCurve(cp, degree=2, knot_vector=torch.tensor([0, 0, 0, .5, .5, 1, 1, 1.0], dtype=torch.float64),
+                               weights=torch.tensor([1, w, 1, w, 1], dtype=torch.float64))
+
+
 SWEPT = {
+    "sphere (profile on the axis at both ends)": lambda: RevolvedSurface(_half_circle(), [0, 0, 0], [0, 0, 1]),
     "full turn": lambda: RevolvedSurface(_profile(), [0.1, -0.2, 0.0], [0.1, 0.05, 1.0]),
     "partial turn": lambda: RevolvedSurface(_profile(), [0.1, -0.2, 0.0], [0.1, 0.05, 1.0], 2.0),
     "extrusion": lambda: ExtrudedSurface(_profile(), [0.3, 1.0, 0.2], 2.5),
