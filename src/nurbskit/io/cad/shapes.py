@@ -204,9 +204,10 @@ def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
 #: check, ShapeFix's self-intersection tests on reading) interval by interval, and a
 #: degree-1 pcurve has one C0 interval per segment, so a 64-segment loop against a
 #: 32-segment hole is 2048 interval pairs; short edges are first sorted out by their 2-D
-#: boxes. Measured on benchmarks/bench_cad.py (100 patches, 64 + 32 point loops, CPU
-#: seconds): 0 -> check 0.9, STEP read 1.5; 4 -> check 0.4, read 1.2 (file 16 % larger);
-#: 1 (an edge per segment) -> check 0.6, read 2.2 (the file's per-edge entities dominate).
+#: boxes. Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
+#: seconds, STEP written = shape + write + read back + BRepCheck): 0 -> 4.1 s, 4 -> 3.6 s
+#: (the analyzer alone 0.9 -> 0.4 s; the file 16 % larger), 1 (an edge per segment) ->
+#: 6.1 s (the file's per-edge entities dominate); results/cad.md has the ablation.
 EDGE_SEGMENTS = 4
 
 
@@ -293,10 +294,6 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
         builder.Add(wire, edge)
     wire.Closed(True)
     return wire
-
-
-def _pad3_np(points: np.ndarray) -> np.ndarray:
-    return points if points.shape[-1] == 3 else np.concatenate([points, np.zeros((len(points), 1))], axis=1)
 
 
 def face_of(obj, tolerance: float = TOLERANCE):
