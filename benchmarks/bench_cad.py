@@ -14,6 +14,13 @@ stage once to warm up, then the median of ``--repeats`` runs:
 - ``written``: shape + write + check, what ``write_cad`` costs;
 - ``read``: ``read_cad``, the file to 100 TrimmedSurface objects.
 
+Each stage is timed twice: wall seconds (``time.perf_counter``) and CPU seconds of this
+process (``time.process_time``; everything here runs on one thread, so CPU seconds are
+what the stage costs on an idle core, and far less sensitive to other processes than
+wall seconds). The fraction of ``written`` each stage takes is from CPU seconds.
+Ablation (STEP, one run each): the trimming loops as one edge per loop, one edge per
+polyline segment, and edges of ``shapes.EDGE_SEGMENTS`` segments (the default).
+
 Peers in the same process: OCC's own STEP/IGES writer (``STEPControl_Writer::Write``,
 12 decimals) on the same shape (ratio ``write / peer``), and the same faces with OCC's
 approximated 3-D trimming curves (``BRepLib::BuildCurves3d``) instead of our exact ones
@@ -70,13 +77,15 @@ def make_patches(count: int, size: int = 12, seed: int = 0) -> list[TrimmedSurfa
 
 
 def median_time(fn, repeats: int):
+    """(median wall seconds, median CPU seconds of this process, last result) after a warm-up."""
     result = fn()  # warm-up
-    times = []
+    walls, cpus = [], []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         result = fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times), result
+        walls.append(time.perf_counter() - t)
+        cpus.append(time.process_time() - c)
+    return statistics.median(walls), statistics.median(cpus), result
 
 
 def occ_default_write(shape, path: Path, fmt: str) -> None:
@@ -162,6 +171,27 @@ def max_error(patches, model) -> float:
     return worst
 
 
+def ablation(patches, tmp: Path, segments: list[int]) -> list[dict]:
+    """STEP written with the trimming loops cut into edges of ``k`` segments (0: one edge per loop)."""
+    from nurbskit.io.cad import shapes
+    from nurbskit.io.cad.exchange import read_shape, write_shape
+
+    default, rows = shapes.EDGE_SEGMENTS, []
+    try:
+        for k in segments:
+            shapes.EDGE_SEGMENTS = k
+            path = tmp / f"ablation-{k}.step"
+            ts, cs, shape = median_time(lambda: shapes.to_shape(patches, sew_tolerance=None), 1)
+            tw, cw, _ = median_time(lambda: write_shape(shape, path, check=False), 1)
+            tc, cc, report = median_time(lambda: shapes.check_shape(read_shape(path)), 1)
+            rows.append({"edge_segments": k, "written_cpu_s": cs + cw + cc, "shape_cpu_s": cs, "write_cpu_s": cw,
+                         "check_cpu_s": cc, "written_s": ts + tw + tc, "edges": report["edges"],
+                         "valid": report["valid"], "file_mb": path.stat().st_size / 1e6})
+    finally:
+        shapes.EDGE_SEGMENTS = default
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -169,55 +199,80 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
 
-    from nurbskit.io.cad import read_cad
+    from nurbskit.io.cad import read_cad, shapes
     from nurbskit.io.cad.exchange import _quiet, read_shape, write_shape
     from nurbskit.io.cad.shapes import check_shape, to_shape
 
     _quiet()
     patches = make_patches(args.patches)
-    t_shape, shape = median_time(lambda: to_shape(patches, sew_tolerance=None), args.repeats)
-    t_approx, approx = median_time(lambda: approximated_faces(patches), args.repeats)
+    load_start = os.getloadavg()[0]
+    t_shape, c_shape, shape = median_time(lambda: to_shape(patches, sew_tolerance=None), args.repeats)
+    t_approx, _, approx = median_time(lambda: approximated_faces(patches), args.repeats)
     exact_poles, approx_poles = curve_poles(shape), [n for f in approx for n in curve_poles(f)]
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-cad-") as tmp:
         for fmt in ("step", "iges", "brep"):
             path = Path(tmp) / f"patches.{fmt}"
-            t_write, _ = median_time(lambda: write_shape(shape, path, check=False), args.repeats)
-            t_check, report = median_time(lambda: check_shape(read_shape(path)), args.repeats)
-            t_read, model = median_time(lambda: read_cad(path), args.repeats)
+            t_write, c_write, _ = median_time(lambda: write_shape(shape, path, check=False), args.repeats)
+            # the check = reading the file back + OCC's checker on what was read: timed apart
+            t_back, c_back, back = median_time(lambda: read_shape(path), args.repeats)
+            t_analyze, c_analyze, report = median_time(lambda: check_shape(back), args.repeats)
+            t_check, c_check = t_back + t_analyze, c_back + c_analyze
+            t_read, c_read, model = median_time(lambda: read_cad(path), args.repeats)
             peer = Path(tmp) / f"peer.{fmt}"
-            t_peer, _ = median_time(lambda: occ_default_write(shape, peer, fmt), args.repeats)
+            t_peer, _, _ = median_time(lambda: occ_default_write(shape, peer, fmt), args.repeats)
+            c_written = c_shape + c_write + c_check
             rows.append({
                 "format": fmt, "patches": len(patches), "shape_s": t_shape, "write_s": t_write, "check_s": t_check,
                 "written_s": t_shape + t_write + t_check, "read_s": t_read,
+                "shape_cpu_s": c_shape, "write_cpu_s": c_write, "check_cpu_s": c_check, "written_cpu_s": c_written,
+                "read_cpu_s": c_read, "check_read_back_cpu_s": c_back, "check_analyzer_cpu_s": c_analyze,
+                "shape_fraction": c_shape / c_written, "write_fraction": c_write / c_written,
+                "check_fraction": c_check / c_written,
                 "occ_default_write_s": t_peer, "write_vs_occ_default": t_write / t_peer,
                 "valid": report["valid"], "faces_read": len(model.faces), "edges": report["edges"],
                 "holes_read": sum(len(f.holes) for f in model.faces),
                 "file_mb": path.stat().st_size / 1e6, "occ_default_file_mb": peer.stat().st_size / 1e6,
                 "max_error_rel": max_error(patches, model),
             })
-            print(f"{fmt}: written {rows[-1]['written_s']:.2f} s (shape {t_shape:.2f}, write {t_write:.2f}, "
-                  f"check {t_check:.2f}), read {t_read:.2f} s, valid {report['valid']}", file=sys.stderr)
+            print(f"{fmt}: written {rows[-1]['written_s']:.2f} s wall, {c_written:.2f} s CPU (shape {c_shape:.2f}, "
+                  f"write {c_write:.2f}, check {c_check:.2f}), read {c_read:.2f} s CPU, valid {report['valid']}",
+                  file=sys.stderr)
+        ablation_rows = ablation(patches, Path(tmp), [0, 1, shapes.EDGE_SEGMENTS])
     meta = {
         "patches": len(patches), "control_points": "12 x 12, bicubic, rational", "loop_points": [64, 32],
-        "exact_curve_poles_per_loop": float(np.mean(exact_poles)),
+        "edge_segments": shapes.EDGE_SEGMENTS,
+        "exact_curve_poles_per_loop": float(np.sum(exact_poles)) / (2 * len(patches)),
         "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
         "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
-        "repeats": args.repeats, "torch_threads": 1,
-        "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
+        "repeats": args.repeats, "torch_threads": 1, "ablation": ablation_rows,
+        "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
     }
+    step = rows[0]
+    abl = "; ".join(f"{'%d segment(s) per edge' % r['edge_segments'] if r['edge_segments'] else 'one edge per loop'}: "
+                    f"{r['written_cpu_s']:.2f} s CPU (check {r['check_cpu_s']:.2f}), {r['edges']} edges, "
+                    f"{r['file_mb']:.1f} MB" for r in ablation_rows)
     notes = (f"{len(patches)} trimmed patches (12 x 12 rational bicubic, outer loop 64 points, hole 32). "
              "`written` = shape + write + check (what `write_cad` costs); `read` = file to nurbskit objects. "
-             f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop, shape "
-             f"{t_shape:.2f} s; OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
-             f"poles per loop, {t_approx:.2f} s. `max_error_rel`: largest |S_back - S| on an 11 x 11 grid per "
-             "patch over the patch's diagonal. Peer: OCC's own writer on the same shape (STEP/IGES with 12/9 digits). "
-             f"Load average at the end of the run: {meta['load_average_1min']:.1f} on {meta['cpu_count']} cores "
-             "(seconds are inflated by that much contention; ratios within the run are fairer).")
-    columns = [("format", "format"), ("written_s", "written (s)"), ("shape_s", "shape (s)"), ("write_s", "write (s)"),
-               ("check_s", "check (s)"), ("read_s", "read (s)"), ("occ_default_write_s", "OCC default write (s)"),
-               ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("file_mb", "MB"),
-               ("occ_default_file_mb", "OCC default MB"), ("max_error_rel", "max error / diag")]
+             "Seconds: wall (median); `CPU` columns: CPU seconds of the process (one thread), what a stage costs on "
+             f"an idle core. STEP's CPU split: shape {step['shape_fraction']:.0%}, write {step['write_fraction']:.0%}, "
+             f"check {step['check_fraction']:.0%} (reading the file back {step['check_read_back_cpu_s']:.2f} s, "
+             f"BRepCheck_Analyzer {step['check_analyzer_cpu_s']:.2f} s). "
+             f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
+             f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop (over its edges); "
+             f"OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
+             f"poles per loop, {t_approx:.2f} s wall against {t_shape:.2f} s for the exact ones. `max_error_rel`: "
+             "largest |S_back - S| on an 11 x 11 grid per patch over the patch's diagonal. Peer: OCC's own writer on "
+             "the same shape (STEP/IGES with 12/9 digits). "
+             f"Load average (1 min) {meta['load_average_1min_start']:.1f} at the start and "
+             f"{meta['load_average_1min']:.1f} at the end on {meta['cpu_count']} cores: wall seconds are inflated by "
+             "that contention; CPU seconds and ratios within the run are fairer.")
+    columns = [("format", "format"), ("written_s", "written (s)"), ("written_cpu_s", "written CPU (s)"),
+               ("shape_cpu_s", "shape CPU"), ("write_cpu_s", "write CPU"), ("check_cpu_s", "check CPU"),
+               ("read_s", "read (s)"), ("read_cpu_s", "read CPU"), ("write_s", "write (s)"),
+               ("occ_default_write_s", "OCC default write (s)"), ("write_vs_occ_default", "write / OCC default"),
+               ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("edges", "edges"),
+               ("file_mb", "MB"), ("occ_default_file_mb", "OCC default MB"), ("max_error_rel", "max error / diag")]
     path = write_results("cad", rows, columns, meta=meta, title="CAD exchange: 100 trimmed patches", notes=notes)
     print(path.read_text())
     return 0

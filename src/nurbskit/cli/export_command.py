@@ -7,10 +7,16 @@ Examples::
     nurbskit export part.step part.json                  # every face: {"surfaces": [...]} with its trim
     nurbskit export part.step part.stl --tolerance 0.01  # tessellated (OBJ, PLY, STL, glTF, GLB, OFF)
     nurbskit export vol/mesh.obj vol.step                # a closed mesh: a solid of triangles
+    nurbskit export vase/report.json vase.step           # `nurbskit shape`: SURFACE_OF_REVOLUTION
+    nurbskit export vase vase.step --bspline             # (its folder works too) as the exact NURBS
 
 Inputs: nurbskit JSON (one object, ``{"patches": [...]}`` or ``{"surfaces": [...]}``),
-``.3dm``, STEP, IGES, BREP, the other NURBS files of ``nurbskit convert``, and triangle
-meshes (to CAD formats, as a triangulated solid). Outputs: by OUTPUT's extension or
+``.3dm``, STEP, IGES, BREP, the other NURBS files of ``nurbskit convert``, triangle
+meshes (to CAD formats, as a triangulated solid), and the ``report.json`` (or folder) of
+``nurbskit shape``: its surface of revolution or extrusion goes to STEP as
+``SURFACE_OF_REVOLUTION`` / ``SURFACE_OF_LINEAR_EXTRUSION`` over the exact B-spline
+profile (IGES 120 / 122, BREP likewise; ``--bspline``: the exact NURBS instead; other
+formats always get the NURBS). Outputs: by OUTPUT's extension or
 ``--format``. STEP, IGES and BREP need the ``[cad]`` extra (OpenCASCADE), ``.3dm`` too
 (rhino3dm).
 
@@ -43,6 +49,9 @@ def register(subparsers) -> None:
     p.add_argument("--tolerance", type=float, default=None,
                    help="tessellation: largest distance from a triangle to the surface, in model units "
                         "(default 1e-3 of the bounding-box diagonal)")
+    p.add_argument("--bspline", action="store_true",
+                   help="a `nurbskit shape` report: write its exact NURBS, not the analytic surface of "
+                        "revolution / extrusion")
     p.add_argument("--no-check", action="store_true",
                    help="CAD files: do not read the file back and check it (not recommended)")
     p.set_defaults(run=run_export)
@@ -90,13 +99,17 @@ def _read_input(path: Path) -> list:
 def run_export(args) -> int:
     from ..io._base import check_readable
 
-    src, out = check_readable(args.input), Path(args.output)
+    src = Path(args.input)
+    if src.is_dir() and (src / "report.json").is_file():  # a `nurbskit shape` folder
+        src = src / "report.json"
+    src, out = check_readable(src), Path(args.output)
     if out.is_dir():
         raise OptionError(f"{out}: is a directory, expected an output file name")
     if args.tolerance is not None and not args.tolerance > 0:
         raise OptionError(f"--tolerance must be positive, got {args.tolerance}")
     objects = _read_input(src)
-    report = write_result(objects, out, format=args.format, tolerance=args.tolerance, check=not args.no_check)
+    report = write_result(objects, out, format=args.format, tolerance=args.tolerance, check=not args.no_check,
+                          analytic=not args.bspline)
     parts = [f"wrote {out} ({report['format']}"]
     if "faces" in report:
         parts.append(f", {report['faces']} faces, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")

@@ -10,9 +10,10 @@ first use: importing this package needs neither.
   ``cad_info`` for ``nurbskit info``, and ``write_result`` for every output format.
 - :mod:`.rhino`: ``.3dm``.
 
-Not done: surfaces of revolution and extrusion are written through their exact
-B-spline form only (nurbskit's core has no such constructor yet, so there is nothing to
-write as STEP's ``SURFACE_OF_REVOLUTION``); reading them works (OCC converts them).
+- :mod:`.analytic`: :class:`RevolvedSurface` / :class:`ExtrudedSurface` (a profile and its
+  sweep, e.g. from ``nurbskit shape``'s report), written as STEP's
+  ``SURFACE_OF_REVOLUTION`` / ``SURFACE_OF_LINEAR_EXTRUSION``; ``to_nurbs()`` is the exact
+  NURBS. Reading converts such faces to B-splines (OCC's ``BRepBuilderAPI_NurbsConvert``).
 
 Example:
     >>> import torch, nurbskit
@@ -24,6 +25,7 @@ Example:
     (5, 5)
 """
 
+from .analytic import ExtrudedSurface, RevolvedSurface, swept_from_report
 from .exchange import (
     CAD_FORMATS,
     RESULT_FORMATS,
@@ -48,5 +50,6 @@ __all__ = [
     "write_shape", "read_shape", "cad_format", "result_format", "tessellate_objects", "CAD_FORMATS",
     "RESULT_FORMATS", "curve_to_occ", "curve_from_occ", "surface_to_occ", "surface_from_occ", "is_periodic",
     "to_shape", "face_of", "mesh_solid", "shape_to_model", "check_shape", "tessellate_shape",
-    "read_3dm", "read_3dm_all", "write_3dm", "write_3dm_objects",
+    "read_3dm", "read_3dm_all", "write_3dm", "write_3dm_objects", "RevolvedSurface", "ExtrudedSurface",
+    "swept_from_report",
 ]

@@ -150,7 +150,7 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
 
 
 def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_tolerance: float | None = 1e-6,
-              check: bool = True) -> dict:
+              check: bool = True, analytic: bool = True) -> dict:
     """Write nurbskit objects to a STEP (.step/.stp), IGES (.iges/.igs) or BREP (.brep) file.
 
     Args:
@@ -159,6 +159,10 @@ def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_to
             surfaces sharing edges within ``sew_tolerance`` are sewn into shells).
         path: the file; its extension picks the format unless ``format`` is given.
         check: read the file back with OCC and check it (default; a failure raises).
+        analytic: write :class:`~nurbskit.io.cad.analytic.RevolvedSurface` /
+            ``ExtrudedSurface`` as STEP's ``SURFACE_OF_REVOLUTION`` /
+            ``SURFACE_OF_LINEAR_EXTRUSION`` (IGES 120 / 122; default), else as their
+            exact NURBS.
 
     Returns:
         The check report of :func:`write_shape`.
@@ -169,7 +173,7 @@ def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_to
         >>> write_cad(s, "patch.step")["valid"]  # doctest: +SKIP
         True
     """
-    shape = to_shape(obj, sew_tolerance=sew_tolerance)
+    shape = to_shape(obj, sew_tolerance=sew_tolerance, analytic=analytic)
     return write_shape(shape, path, format=format, check=check)
 
 
@@ -281,7 +285,8 @@ def read_objects(path: str | os.PathLike) -> list:
     """The geometry of a nurbskit JSON (one object, ``{"patches": [...]}`` or
     ``{"surfaces": [...]}``, trimmed or not), ``.3dm``, STEP, IGES or BREP file, as a list
     of NURBSCurve / NURBSSurface / TrimmedSurface / NURBSVolume; other NURBS files go
-    through :func:`nurbskit.io.read_nurbs`."""
+    through :func:`nurbskit.io.read_nurbs`. The ``report.json`` of ``nurbskit shape`` gives
+    its :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface``."""
     from .._base import check_readable
 
     path = check_readable(path)
@@ -307,6 +312,14 @@ def _read_json_objects(path: Path) -> list:
         data = json.loads(path.read_bytes())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid JSON ({getattr(exc, 'msg', exc)})") from None
+    if isinstance(data, dict) and "format" not in data and data.get("kind") in ("revolution", "extrusion", "freeform") \
+            and "profile" in data:  # the report.json of `nurbskit shape`
+        from .analytic import swept_from_report
+
+        swept = swept_from_report(data, source=str(path))
+        if swept is None:
+            raise InputError(f"{path}: `nurbskit shape` chose a free-form surface; export surface.json beside it")
+        return [swept]
     if isinstance(data, dict) and data.get("format") == "nurbskit" and "kind" in data:
         if data.get("trim"):
             return [TrimmedSurface.from_dict(data, source=str(path))]
@@ -416,10 +429,12 @@ def result_format(path: str | os.PathLike, format: str | None = None) -> str:
 
 
 def write_result(obj, path: str | os.PathLike, format: str | None = None, tolerance: float | None = None,
-                 *, check: bool = True) -> dict:
+                 *, check: bool = True, analytic: bool = True) -> dict:
     """Write a result (surface, trimmed surface, curve, patch list or mesh) in any format.
 
-    CAD formats (step, iges, brep) go through :func:`write_cad` (read back and checked);
+    CAD formats (step, iges, brep) go through :func:`write_cad` (read back and checked;
+    ``analytic``: swept surfaces as analytic entities, see there); the other formats get a
+    swept surface's exact NURBS;
     ``3dm`` through rhino3dm (trimming loops are not stored there: reported in
     ``left_out``); ``json`` as nurbskit JSON; mesh formats (obj, ply, stl, gltf/glb,
     off) tessellate surfaces with OCC's mesher to ``tolerance`` (chordal, model units;
@@ -429,11 +444,16 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
         A report: ``format``, ``path``, and per format the check report (CAD), the
         triangle counts (meshes) or ``left_out``.
     """
+    from .analytic import is_swept
+
     path = Path(path)
     fmt = result_format(path, format)
     objects = _as_list(obj)
+    if fmt not in ("step", "iges", "brep"):  # only OCC's formats have swept surfaces: the rest get the NURBS
+        objects = [o.to_nurbs() if is_swept(o) else o for o in objects]
     if fmt in ("step", "iges", "brep"):
-        report = write_cad(objects if len(objects) > 1 else objects[0], path, format=fmt, check=check)
+        report = write_cad(objects if len(objects) > 1 else objects[0], path, format=fmt, check=check,
+                           analytic=analytic)
     elif fmt == "3dm":
         from .rhino import write_3dm_objects
 

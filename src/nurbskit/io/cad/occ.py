@@ -45,10 +45,11 @@ def _array1(values, kind: str):
     from OCP.collections import Array1_double, Array1_int
 
     cls = Array1_int if kind == "int" else Array1_double
-    cast = int if kind == "int" else float
+    values = np.asarray(values, dtype=np.int64 if kind == "int" else np.float64).tolist()  # Python ints / floats
     arr = cls(1, len(values))
-    for i, v in enumerate(values):
-        arr.SetValue(i + 1, cast(v))
+    set_value = arr.SetValue  # one attribute lookup, not one per element (this loop is hot)
+    for i, v in enumerate(values, 1):
+        set_value(i, v)
     return arr
 
 
@@ -131,8 +132,9 @@ def curve_to_occ(curve: NURBSCurve, periodic: bool | str = "auto"):
     p = curve.degrees[0]
     values, mult, closed, count = _axis_form(flat, p, cp, w, 0, periodic)
     poles = Array1_gp_Pnt(1, count)
-    for i in range(count):
-        poles.SetValue(i + 1, gp_Pnt(*map(float, cp[i])))
+    set_pole = poles.SetValue
+    for i, xyz in enumerate(cp[:count].tolist(), 1):
+        set_pole(i, gp_Pnt(*xyz))
     try:
         if curve.is_rational:
             return Geom_BSplineCurve(poles, _array1(w[:count], "float"), _array1(values, "float"),
@@ -193,17 +195,18 @@ def surface_to_occ(surface: NURBSSurface, periodic: bool | str = "auto"):
     uk, um, uper, nu = _axis_form(fu, p, cp, w, 0, periodic)
     vk, vm, vper, nv = _axis_form(fv, q, cp, w, 1, periodic)
     poles = Array2_gp_Pnt(1, nu, 1, nv)
-    for i in range(nu):
-        for j in range(nv):
-            x, y, z = cp[i, j]
-            poles.SetValue(i + 1, j + 1, gp_Pnt(float(x), float(y), float(z)))
+    set_pole = poles.SetValue
+    for i, row in enumerate(cp[:nu, :nv].tolist(), 1):
+        for j, xyz in enumerate(row, 1):
+            set_pole(i, j, gp_Pnt(*xyz))
     args = [_array1(uk, "float"), _array1(vk, "float"), _array1(um, "int"), _array1(vm, "int"), p, q, uper, vper]
     try:
         if surface.is_rational:
             weights = Array2_double(1, nu, 1, nv)
-            for i in range(nu):
-                for j in range(nv):
-                    weights.SetValue(i + 1, j + 1, float(w[i, j]))
+            set_weight = weights.SetValue
+            for i, row in enumerate(w[:nu, :nv].tolist(), 1):
+                for j, wij in enumerate(row, 1):
+                    set_weight(i, j, wij)
             return Geom_BSplineSurface(poles, weights, *args)
         return Geom_BSplineSurface(poles, *args)
     except Exception as exc:

@@ -3,13 +3,16 @@ shells, triangulated solids, and the nurbskit objects found in any shape.
 
 Convention:
     A :class:`~nurbskit.core.trim.TrimmedSurface` becomes one face on its surface. Each
-    trimming loop (a closed polyline in (u, v)) becomes one closed edge whose curve on
-    the surface is the polyline itself (a degree-1 ``Geom2d_BSplineCurve`` through the
-    loop's points, parameter = cumulative chord length in (u, v)), and its 3-D curve is the
-    exact image of that polyline: along a straight (u, v) segment the surface point is a polynomial of
-    degree ``p + q`` (homogeneous coordinates) within a knot span, so the 3-D curve is a
-    rational B-spline of that degree, computed by :func:`loop_curve_3d` (no
-    approximation, unlike OCC's ``BRepLib::BuildCurves3d``). The outer loop runs
+    trimming loop (a closed polyline in (u, v)) becomes a wire of edges of
+    ``EDGE_SEGMENTS`` polyline segments (why: at ``EDGE_SEGMENTS``); an edge's curve on
+    the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
+    parameter = cumulative chord length in (u, v) along the loop), and its 3-D curve is
+    its piece of the exact image of the polyline: along a straight (u, v) segment the
+    surface point is a polynomial of degree ``p + q`` (homogeneous coordinates) within a
+    knot span, so the 3-D curve is a rational B-spline of that degree, computed by
+    :func:`loop_curve_3d` (no approximation, unlike OCC's ``BRepLib::BuildCurves3d``).
+    A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
+    face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
     kept region is on the left of every loop. A surface without loops is bounded by its
     parameter domain (its natural boundary).
@@ -25,6 +28,7 @@ Convention:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -80,7 +84,8 @@ def _chord_parameters(uv: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg)])
 
 
-def _bernstein_inverse(degree: int) -> np.ndarray:
+@functools.lru_cache(maxsize=None)
+def _bernstein_inverse(degree: int) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of the Bernstein collocation matrix at ``degree + 1`` Chebyshev-Lobatto nodes."""
     from math import comb
 
@@ -121,6 +126,13 @@ def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
     Returns:
         ``(poles (M, 3), weights (M,) or None, flat knots, degree)``.
     """
+    return loop_curves_3d(surface, [(uv, params)])[0]
+
+
+def loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple]:
+    """:func:`loop_curve_3d` for several ``(uv, params)`` loops on one surface, with one
+    evaluation of the surface for all of them (the evaluation's set-up dominates for
+    loops of a few dozen points)."""
     (p, q) = surface.degrees
     d = p + q
     (u0, u1), (v0, v1) = surface.domain
@@ -128,6 +140,37 @@ def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
     for kv, lo, hi in ((surface.knot_vectors[0], u0, u1), (surface.knot_vectors[1], v0, v1)):
         k = np.unique(kv.detach().cpu().double().numpy())
         inner.append(k[(k > lo) & (k < hi)])
+    tau, inverse = _bernstein_inverse(d)
+    pieces, all_nodes = [], []
+    for uv, params in loops:
+        starts, ends, s_start, s_end = _loop_pieces(uv, params, inner)
+        nodes = starts[:, None, :] + tau[None, :, None] * (ends - starts)[:, None, :]  # (P, d + 1, 2)
+        nodes[:, 0], nodes[:, -1] = starts, ends
+        pieces.append((s_start, s_end))
+        all_nodes.append(nodes.reshape(-1, 2))
+    h_all = _homogeneous(surface).evaluate(torch.from_numpy(np.vstack(all_nodes))).numpy()
+    out, offset = [], 0
+    rational = bool(surface.is_rational)
+    for (s_start, s_end), nodes in zip(pieces, all_nodes):
+        h = h_all[offset:offset + len(nodes)].reshape(-1, d + 1, 4)
+        offset += len(nodes)
+        coeff = np.einsum("jk,pkc->pjc", inverse, h)
+        coeff[:, 0], coeff[:, -1] = h[:, 0], h[:, -1]  # the ends interpolate exactly
+        coeff[1:, 0] = coeff[:-1, -1]  # neighbouring pieces share their end pole
+        poles_h = np.concatenate([coeff[:1, 0], coeff[:, 1:].reshape(-1, 4)])
+        weights = poles_h[:, 3]
+        if np.any(weights <= 0):  # pragma: no cover - positive weights give positive Bernstein coefficients
+            raise NurbskitError("a trimming loop's 3-D curve has non-positive weights")
+        poles = poles_h[:, :3] / weights[:, None]
+        flat = np.concatenate([[s_start[0]] * (d + 1), np.repeat(s_start[1:], d), [s_end[-1]] * (d + 1)])
+        out.append((poles, (weights if rational else None), flat, d))
+    return out
+
+
+def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
+    """The pieces of a closed (u, v) polyline between its points and its crossings of the
+    knot lines ``inner`` (u knots, v knots): start and end points ``(P, 2)`` and
+    parameters ``(P,)``."""
     a, b = uv[:-1], uv[1:]
     length = params[1:] - params[:-1]  # chord length of each segment
     eps = 1e-12 * params[-1]
@@ -153,82 +196,99 @@ def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
     end = cut == 1  # segment ends exactly at the polyline's points
     pts[end], s[end] = b[seg[end]], params[seg[end] + 1]
     first = np.flatnonzero(seg[:-1] == seg[1:])  # pieces: consecutive breaks of one segment
-    starts, ends, s_start, s_end = pts[first], pts[first + 1], s[first], s[first + 1]
-    tau, inverse = _bernstein_inverse(d)
-    nodes = starts[:, None, :] + tau[None, :, None] * (ends - starts)[:, None, :]  # (P, d + 1, 2)
-    nodes[:, 0], nodes[:, -1] = starts, ends
-    h = _homogeneous(surface).evaluate(torch.from_numpy(nodes.reshape(-1, 2))).numpy().reshape(len(starts), d + 1, 4)
-    coeff = np.einsum("jk,pkc->pjc", inverse, h)
-    coeff[:, 0], coeff[:, -1] = h[:, 0], h[:, -1]  # the ends interpolate exactly
-    coeff[1:, 0] = coeff[:-1, -1]  # neighbouring pieces share their end pole
-    poles_h = np.vstack([coeff[0, :1]] + [c[1:] for c in coeff])
-    weights = poles_h[:, 3]
-    if np.any(weights <= 0):  # pragma: no cover - positive weights give positive Bernstein coefficients
-        raise NurbskitError("a trimming loop's 3-D curve has non-positive weights")
-    poles = poles_h[:, :3] / weights[:, None]
-    flat = np.concatenate([[s_start[0]] * (d + 1), np.repeat(s_start[1:], d), [s_end[-1]] * (d + 1)])
-    rational = bool(surface.is_rational)
-    return poles, (weights if rational else None), flat, d
+    return pts[first], pts[first + 1], s[first], s[first + 1]
 
 
-#: (u, v) segments per edge of a trimming loop; 0: one closed edge per loop. Measured on
-#: the benchmark's patches (64 + 32 point loops): one edge per loop builds in 45 ms and
-#: checks in 35 ms per face; 8 segments per edge check in 24 ms but build in 140 ms.
-EDGE_SEGMENTS = 0
+#: (u, v) segments per edge of a trimming loop; 0: one closed edge per loop. Why not one
+#: edge per loop: OCC intersects pcurves (BRepCheck_Face::IntersectWires on writing's
+#: check, ShapeFix's self-intersection tests on reading) interval by interval, and a
+#: degree-1 pcurve has one C0 interval per segment, so a 64-segment loop against a
+#: 32-segment hole is 2048 interval pairs; short edges are first sorted out by their 2-D
+#: boxes. Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
+#: seconds, STEP written = shape + write + read back + BRepCheck): 0 -> 4.1 s, 4 -> 3.6 s
+#: (the analyzer alone 0.9 -> 0.4 s; the file 16 % larger), 1 (an edge per segment) ->
+#: 6.1 s (the file's per-edge entities dominate); results/cad.md has the ablation.
+EDGE_SEGMENTS = 4
 
 
-def _loop_wire(loop: TrimLoop, surface, surface_geom, tolerance: float):
-    """A closed wire on ``surface_geom`` along the loop's (u, v) polyline: one closed edge
-    (or edges of ``EDGE_SEGMENTS`` segments), each with the polyline as its pcurve and the exact 3-D
-    image of it (:func:`loop_curve_3d`) as its curve, sharing vertices."""
-    ocp()
-    from OCP.BRep import BRep_Builder
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
-    from OCP.collections import Array1_gp_Pnt, Array1_gp_Pnt2d
+def _bspline_curve_3d(poles, weights, flat, degree):
+    """A ``Geom_BSplineCurve`` from poles ``(M, 3)``, optional weights ``(M,)`` and a flat knot vector."""
+    from OCP.collections import Array1_gp_Pnt
     from OCP.Geom import Geom_BSplineCurve
-    from OCP.Geom2d import Geom2d_BSplineCurve
-    from OCP.gp import gp_Pnt, gp_Pnt2d
-    from OCP.TopLoc import TopLoc_Location
-    from OCP.TopoDS import TopoDS_Wire
+    from OCP.gp import gp_Pnt
 
     from .occ import _array1, knots_and_multiplicities
 
-    uv = np.vstack([loop.uv, loop.uv[:1]])  # closed: the first point again at the end
-    t = _chord_parameters(uv)
+    knots, mults = knots_and_multiplicities(flat)
+    arr = Array1_gp_Pnt(1, len(poles))
+    set_pole = arr.SetValue  # hot: hundreds of poles per loop
+    for i, xyz in enumerate(poles.tolist(), 1):
+        set_pole(i, gp_Pnt(*xyz))
+    if weights is None:
+        return Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
+    return Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"), _array1(mults, "int"),
+                             degree, False)
+
+
+def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tolerance: float,
+               segments: int | None = None):
+    """A closed wire on ``surface_geom`` along a closed (u, v) polyline ``uv (L + 1, 2)``
+    with chord parameters ``t (L + 1,)`` and its exact 3-D image ``curve_3d`` (the tuple of
+    :func:`loop_curve_3d`).
+
+    The loop is cut into edges of ``segments`` polyline segments (default
+    ``EDGE_SEGMENTS``; 0: one closed edge), each with its piece of the polyline as pcurve
+    (degree 1) and its piece of the 3-D curve (``Segment`` of OCC's curve), sharing
+    vertices with its neighbours.
+    """
+    ocp()
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
+    from OCP.collections import Array1_gp_Pnt2d
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.gp import gp_Pnt2d
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Wire
+
+    from .occ import _array1
+
+    def polyline(i0: int, i1: int):  # points i0..i1 as a degree-1 B-spline (exact: no knot insertion)
+        poles2d = Array1_gp_Pnt2d(1, i1 - i0 + 1)
+        set_pole = poles2d.SetValue
+        for i, uv_i in enumerate(uv[i0:i1 + 1].tolist(), 1):
+            set_pole(i, gp_Pnt2d(*uv_i))
+        mult = np.ones(i1 - i0 + 1, dtype=int)
+        mult[0] = mult[-1] = 2
+        return Geom2d_BSplineCurve(poles2d, _array1(t[i0:i1 + 1], "float"), _array1(mult, "int"), 1, False)
+
+    segments = EDGE_SEGMENTS if segments is None else segments
     count = len(uv) - 1
-    pieces = max(1, round(count / EDGE_SEGMENTS)) if EDGE_SEGMENTS else 1
+    curve = _bspline_curve_3d(*curve_3d)
+    pieces = max(1, round(count / segments)) if segments else 1
     cuts = np.unique(np.linspace(0, count, pieces + 1).round().astype(int))
-    corners = _pad3_np(surface.evaluate(torch.from_numpy(uv[cuts[:-1]]).to(surface.dtype)).detach().cpu().double().numpy())
-    vertices = [BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, c))).Vertex() for c in corners]
-    vertices.append(vertices[0])
     builder = BRep_Builder()
     wire = TopoDS_Wire()
     builder.MakeWire(wire)
-    for k, (i0, i1) in enumerate(zip(cuts[:-1], cuts[1:])):
-        part, tp = uv[i0:i1 + 1], t[i0:i1 + 1]
-        poles2d = Array1_gp_Pnt2d(1, len(part))
-        for i, (u, v) in enumerate(part.tolist()):
-            poles2d.SetValue(i + 1, gp_Pnt2d(u, v))
-        mult = np.ones(len(tp), dtype=int)
-        mult[0] = mult[-1] = 2
-        pcurve = Geom2d_BSplineCurve(poles2d, _array1(tp, "float"), _array1(mult, "int"), 1, False)
-        poles, weights, flat, degree = loop_curve_3d(surface, part, tp)
-        poles[0], poles[-1] = corners[k], corners[(k + 1) % len(corners)]  # the shared vertices, exactly
-        knots, mults = knots_and_multiplicities(flat)
-        arr = Array1_gp_Pnt(1, len(poles))
-        for i, (x, y, z) in enumerate(poles.tolist()):
-            arr.SetValue(i + 1, gp_Pnt(x, y, z))
-        if weights is None:
-            curve = Geom_BSplineCurve(arr, _array1(knots, "float"), _array1(mults, "int"), degree, False)
+    location = TopLoc_Location()
+    if len(cuts) == 2:  # one closed edge: OCC makes its one vertex
+        ranges, vertices = [None], None
+    else:
+        # the curve passes exactly through its C0 poles at the polyline's points
+        vertices = [BRepBuilderAPI_MakeVertex(curve.Value(float(t[c]))).Vertex() for c in cuts[:-1]]
+        vertices.append(vertices[0])
+        ranges = list(zip(cuts[:-1], cuts[1:]))
+    for k, piece in enumerate(ranges):
+        if piece is None:
+            maker, pc = BRepBuilderAPI_MakeEdge(curve), polyline(0, count)
         else:
-            curve = Geom_BSplineCurve(arr, _array1(weights, "float"), _array1(knots, "float"),
-                                      _array1(mults, "int"), degree, False)
-        # one edge for the whole loop: a closed edge, OCC makes its one vertex
-        maker = BRepBuilderAPI_MakeEdge(curve) if len(cuts) == 2 else BRepBuilderAPI_MakeEdge(curve, vertices[k], vertices[k + 1])
+            a, b = float(t[piece[0]]), float(t[piece[1]])
+            c3, pc = curve.Copy(), polyline(*piece)
+            c3.Segment(a, b)  # at the curve's C0 knots: the same poles
+            maker = BRepBuilderAPI_MakeEdge(c3, vertices[k], vertices[k + 1], a, b)
         if not maker.IsDone():
             raise NurbskitError(f"OpenCASCADE could not make an edge of a trimming loop (error {maker.Error()})")
         edge = maker.Edge()
-        builder.UpdateEdge(edge, pcurve, surface_geom, TopLoc_Location(), tolerance)
+        builder.UpdateEdge(edge, pc, surface_geom, location, tolerance)
         builder.SameParameter(edge, True)
         builder.SameRange(edge, True)
         builder.Add(wire, edge)
@@ -236,15 +296,10 @@ def _loop_wire(loop: TrimLoop, surface, surface_geom, tolerance: float):
     return wire
 
 
-def _pad3_np(points: np.ndarray) -> np.ndarray:
-    return points if points.shape[-1] == 3 else np.concatenate([points, np.zeros((len(points), 1))], axis=1)
-
-
 def face_of(obj, tolerance: float = TOLERANCE):
     """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
     ocp()
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
-    from OCP.ShapeFix import ShapeFix_Face
 
     trimmed = obj if isinstance(obj, TrimmedSurface) else TrimmedSurface(obj, [])
     geom = surface_to_occ(trimmed.surface)
@@ -261,8 +316,11 @@ def face_of(obj, tolerance: float = TOLERANCE):
             raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
                               f"(loop bounds {lo.tolist()} to {hi.tolist()})")
     size = max(_surface_size(trimmed.surface), 1.0)
-    wires = [_loop_wire(loop, trimmed.surface, geom, max(tolerance, CURVE_TOLERANCE * size))
-             for loop in trimmed.loops]
+    closed = [np.vstack([loop.uv, loop.uv[:1]]) for loop in trimmed.loops]  # the first point again at the end
+    params = [_chord_parameters(uv) for uv in closed]
+    curves = loop_curves_3d(trimmed.surface, list(zip(closed, params)))
+    wires = [_loop_wire(uv, t, c, geom, max(tolerance, CURVE_TOLERANCE * size))
+             for uv, t, c in zip(closed, params, curves)]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
         maker = BRepBuilderAPI_MakeFace(BRepBuilderAPI_MakeFace(geom, tolerance).Face())
@@ -274,10 +332,10 @@ def face_of(obj, tolerance: float = TOLERANCE):
             maker.Add(w)
     if not maker.IsDone():
         raise NurbskitError(f"OpenCASCADE could not make a trimmed face (error {maker.Error()})")
-    face = maker.Face()
-    fixer = ShapeFix_Face(face)
-    fixer.FixOrientation()  # only if OCC sees a loop the wrong way round (it should not)
-    return fixer.Face()
+    # no ShapeFix_Face::FixOrientation: TrimLoop orients outer loops counter-clockwise and
+    # holes clockwise, which is what OCC expects, and the check after writing (its
+    # BRepCheck_Face::OrientationOfWires) refuses a file where that went wrong
+    return maker.Face()
 
 
 def _surface_size(surface) -> float:
@@ -369,14 +427,18 @@ def _is_mesh(obj) -> bool:
     return hasattr(obj, "vertices") and hasattr(obj, "faces") and not isinstance(obj, (TensorSpline, TrimmedSurface))
 
 
-def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE):
+def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE, analytic: bool = True):
     """An OCC shape for a nurbskit object or a list of them.
 
     NURBSSurface / TrimmedSurface -> face; NURBSCurve -> edge; a mesh (anything with
     ``vertices (V, 3)`` and ``faces (F, 3)``, such as ``nurbskit volume``'s) -> solid;
+    :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` -> a face on
+    OCC's surface of revolution / extrusion (``analytic=False``: on their exact NURBS);
     a list -> a compound whose faces are sewn into shells where neighbouring patches
     share edges within ``sew_tolerance`` (``None``: no sewing).
     """
+    from .analytic import is_swept, swept_face
+
     ocp()
     from OCP.BRep import BRep_Builder
     from OCP.TopoDS import TopoDS_Compound
@@ -388,6 +450,8 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
             shapes.append(mesh_solid(*item, tolerance=tolerance))
         elif _is_mesh(item):
             shapes.append(mesh_solid(item.vertices, item.faces, tolerance=tolerance))
+        elif is_swept(item):
+            faces.append(swept_face(item, tolerance) if analytic else face_of(item.to_nurbs(), tolerance))
         elif isinstance(item, TrimmedSurface) or getattr(item, "kind", None) == "surface":
             faces.append(face_of(item, tolerance))
         elif getattr(item, "kind", None) == "curve":
@@ -526,9 +590,11 @@ def _wire_uv(wire, face, deflection: float) -> np.ndarray:
     if not parts:
         return np.zeros((0, 2))
     uv = np.vstack([p[:-1] for p in parts])  # each edge ends where the next begins
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(uv, axis=0), axis=1) > 0])
+    # where one edge ends and the next begins OCC's evaluations may differ in the last bit
+    tiny = 1e-12 * max(float(np.ptp(uv, axis=0).max()), 1e-300)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(uv, axis=0), axis=1) > tiny])
     uv = uv[keep]
-    if len(uv) > 1 and np.array_equal(uv[0], uv[-1]):
+    if len(uv) > 1 and np.linalg.norm(uv[0] - uv[-1]) <= tiny:
         uv = uv[:-1]
     return uv
 
