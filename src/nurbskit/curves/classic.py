@@ -5,14 +5,16 @@ Steps (each a library call where one exists):
 1. Ink: the image in grey; Otsu's threshold (``skimage.filters.threshold_otsu``) splits it
    in two classes, and the smaller class is the ink, so dark on light and light on dark
    both work (drawings are mostly background).
-2. Skeleton: ``skimage.morphology.skeletonize`` (Zhang-Suen) of the ink mask.
+2. Skeleton: ``skimage.morphology.skeletonize`` (Zhang-Suen) of the ink mask, its thin
+   holes (slivers between strokes running side by side) filled first.
 3. Strokes: the skeleton as an 8-connected pixel graph; endpoints (one neighbour) and
    junctions (three or more; adjacent junction pixels are one junction) are its nodes,
    the pixel chains between them its edges. Spurs shorter than the stroke width are
    pruned, and junctions joined by an edge shorter than the stroke width merged (a thick
-   "X" skeletonises into two "Y"s). At each junction the branches are paired by the
-   straightest continuation (greedily, most nearly opposite directions first), so an "X"
-   gives two strokes and a "T" one stroke and one branch.
+   "X" skeletonises into two "Y"s). At each junction the branches are rejoined by good
+   continuation (see ``_pair_ends``): an "X" gives two strokes, a "T" its bar and its
+   stem, a curve crossing itself one stroke, a hairpin (a curve turning back on itself)
+   one stroke, two curves touching near-tangentially two strokes sharing the stretch.
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -186,12 +188,166 @@ def _direction(pixels: list, reach: int) -> np.ndarray:
     return d / n if n > 0 else d
 
 
+# Holes in the ink at most this deep (pixels from their edge to their middle) are filled.
+_SLIVER = 1.5
+
+
+def _fill_slivers(ink: np.ndarray) -> np.ndarray:
+    """The ink mask with its thin holes filled -> ``(H, W)`` bool.
+
+    Where a curve turns back close to itself (a hairpin) or two strokes run side by side,
+    the background between them is a sliver a pixel or two wide; its skeleton would be a
+    thin cycle of two parallel branches. A hole no deeper than ``_SLIVER`` px (the
+    largest distance from a hole pixel to the ink, ``scipy.ndimage.distance_transform_edt``)
+    is ink; real loops of a curve enclose more.
+    """
+    from scipy import ndimage
+
+    holes = ndimage.binary_fill_holes(ink) & ~ink
+    if not holes.any():
+        return ink
+    labels, n = ndimage.label(holes)
+    depth = np.asarray(ndimage.maximum(ndimage.distance_transform_edt(holes), labels, np.arange(1, n + 1)))
+    thin = np.concatenate([[False], depth <= _SLIVER])
+    return ink | thin[labels]
+
+
+# Good continuation at a junction (cosines of the branches' directions, each pointing away
+# from the junction): two branches continue each other when they leave it in nearly
+# opposite directions (turning by at most 60 degrees: cosine <= -0.5).
+_STRAIGHT = -0.5
+# A hairpin or a near-tangent touch: two branches leaving a three-way junction within
+# about 75 degrees of each other (cosine >= 0.25), the third leaving on the other side
+# (at more than about 100 degrees from each).
+_PARALLEL = 0.25
+_OPPOSITE = -0.2
+
+
+def _pair_ends(edges: list, reach: int) -> tuple[dict, set]:
+    """Which edge continues which through each node of the stroke graph (good continuation).
+
+    ``edges`` is a list of ``(a, b, pixels)`` (node ids, ``-1`` for none; ``pixels`` from
+    ``a`` to ``b`` as ``(row, col)``); an edge end is ``(edge index, side)``, side 0 at
+    ``a`` and 1 at ``b``. Returns ``partner`` (end -> end: a stroke leaving through the
+    first end comes back in through the second) and ``tips``, the ends joined at a
+    hairpin's tip (no trimming there). Edges that two curves share are appended to
+    ``edges`` as a second copy.
+
+    The rules, in order, at each node (the Gestalt rule of good continuation, as in
+    vectorisation of line drawings, e.g. Noris et al., "Topology-driven vectorization of
+    clean line drawings", ACM TOG 2013):
+
+    - Shared edge: at a three-way junction where two branches leave within about 75
+      degrees of each other and the third (the stem) on the other side, two strokes run
+      along the stem. Either it ends there (a dead end: a hairpin, a curve turning back
+      sharply, whose two sides merged into one skeleton line), and the two copies are
+      joined at its tip, one curve; or its other end is a three-way junction of the same
+      shape (two curves touching near-tangentially over a stretch), and the copies
+      continue into the branches there, each into the one that turns least.
+    - Otherwise the branches are paired greedily, most nearly opposite directions
+      first, each turn at most 60 degrees: an "X" gives two strokes, a "T" its bar and
+      its stem. A node with only two branches passes through, whatever the turn.
+    - The two ends of a loop (an edge from a junction back to itself) always continue
+      into other branches when any are left: a curve crossing itself stays one stroke.
+    """
+    at: dict[int, list] = {}
+    for i, (a, b, _) in enumerate(edges):
+        if a >= 0:
+            at.setdefault(a, []).append((i, 0))
+        if b >= 0:
+            at.setdefault(b, []).append((i, 1))
+
+    def direction(end):
+        path = edges[end[0]][2]
+        return _direction(path if end[1] == 0 else path[::-1], reach)
+
+    def other(end):
+        a, b, _ = edges[end[0]]
+        return b if end[1] == 0 else a
+
+    dirs = {end: direction(end) for ends in at.values() for end in ends}
+    cos = lambda e, f: float(dirs[e] @ dirs[f])  # noqa: E731
+
+    def fork(k, stem):
+        """The two other ends at three-way junction ``k`` if they fork away from ``stem``, else None."""
+        ends = at.get(k, [])
+        if len(ends) != 3 or stem not in ends:
+            return None
+        f, g = [e for e in ends if e != stem]
+        if f[0] == g[0] or stem[0] in (f[0], g[0]):
+            return None
+        if cos(f, g) >= _PARALLEL and cos(stem, f) <= _OPPOSITE and cos(stem, g) <= _OPPOSITE:
+            return f, g
+        return None
+
+    partner, tips, done = {}, set(), set()
+
+    def link(e, f):
+        partner[e], partner[f] = f, e
+
+    # Shared edges first, the most nearly parallel forks first.
+    candidates = []
+    for k, ends in at.items():
+        for stem in ends:
+            pair = fork(k, stem)
+            if pair is not None:
+                candidates.append((-cos(*pair), k, stem, pair))
+    candidates.sort(key=lambda t: t[0])
+    for _, k, stem, (f, g) in candidates:
+        if k in done:
+            continue
+        i, side = stem
+        a, b, path = edges[i]
+        if a == b:
+            continue
+        o = other(stem)
+        far = (i, 1 - side)
+        if o >= 0 and o not in done and len(at[o]) == 1:  # a hairpin: the copies meet at the tip
+            j = len(edges)
+            edges.append((a, b, path))
+            link(f, (i, side))
+            link(g, (j, side))
+            link(far, (j, 1 - side))
+            tips.update({far, (j, 1 - side)})
+            done.update({k, o})
+            continue
+        pair2 = fork(o, far) if o >= 0 and o not in done else None
+        if pair2 is not None:  # two curves touching along the stem
+            j = len(edges)
+            edges.append((a, b, path))
+            f2, g2 = pair2
+            if cos(f, f2) > cos(f, g2):  # f continues into the branch most nearly opposite to it
+                f2, g2 = g2, f2
+            link(f, (i, side))
+            link(g, (j, side))
+            link(f2, far)
+            link(g2, (j, 1 - side))
+            done.update({k, o})
+
+    for k, ends in at.items():
+        if k in done:
+            continue
+        if len(ends) == 2 and ends[0][0] != ends[1][0]:
+            link(*ends)  # a pruned spur or a corner: the stroke passes through
+            continue
+        pairs = sorted((cos(e, f), e, f) for x, e in enumerate(ends) for f in ends[x + 1:] if e[0] != f[0])
+        for c, e, f in pairs:
+            if e not in partner and f not in partner and c <= _STRAIGHT:
+                link(e, f)
+        # A loop's ends continue into any branches left (a curl: the curve crosses itself).
+        for c, e, f in pairs:
+            loop = edges[e[0]][0] == edges[e[0]][1] or edges[f[0]][0] == edges[f[0]][1]
+            if loop and e not in partner and f not in partner:
+                link(e, f)
+    return partner, tips
+
+
 def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.ndarray], float]:
     """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width."""
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
-    skel = skeletonize(ink)
+    skel = skeletonize(_fill_slivers(ink))
     if width is None:
         dt = ndimage.distance_transform_edt(ink)
         width = float(2 * np.median(dt[skel])) if skel.any() else 1.0
@@ -231,55 +387,29 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
             pruned.append((ra, rb, path))
     edges = pruned
 
-    # Ends of edges at each junction, and their pairing by straightest continuation.
-    reach = int(max(4, 2 * width))
-    at = {}
-    for i, (a, b, path) in enumerate(edges):
-        if a >= 0:
-            at.setdefault(a, []).append((i, 0))
-        if b >= 0:
-            at.setdefault(b, []).append((i, 1))
-    partner = {}
-    for k, ends in at.items():
-        if len(ends) < 2:
-            continue
-        dirs = {}
-        for i, side in ends:
-            path = edges[i][2]
-            dirs[(i, side)] = _direction(path if side == 0 else path[::-1], reach)
-        pairs = []
-        for x in range(len(ends)):
-            for y in range(x + 1, len(ends)):
-                e, f = ends[x], ends[y]
-                if e[0] == f[0]:
-                    continue  # both ends of one edge (a loop back to the junction)
-                pairs.append((float(dirs[e] @ dirs[f]), e, f))  # -1: straight through
-        pairs.sort(key=lambda t: t[0])
-        # Two branches left (a pruned spur, a corner): the stroke passes through, whatever the turn.
-        limit = 1.0 if len(ends) == 2 else -0.5
-        for cos, e, f in pairs:
-            if e in partner or f in partner or cos > limit:  # turning by more than 60 degrees: no
-                continue
-            partner[e], partner[f] = f, e
+    partner, tips = _pair_ends(edges, int(max(4, 2 * width)))
 
     # Chain edges into strokes.
     used, strokes = set(), []
 
     # Near a junction the skeleton bends towards it (the medial axis of a crossing is not
     # the two centre lines): through a junction, the last pixels of each branch are left
-    # out and the spline bridges the gap.
+    # out and the spline bridges the gap. Not at a hairpin's tip, which is the stroke's own end.
     trim = int(np.ceil(width))
 
     def walk(i, side):
-        chain = []
+        chain, cut = [], False
         while i not in used:
             used.add(i)
             path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
-            if chain:  # arriving through a junction
+            if chain and cut:  # arriving through a junction
                 path = path[min(trim, max(0, len(path) - 2)) + 1:]
+            elif chain:
+                path = path[1:]
             chain.extend(path)
             nxt = partner.get((i, 1 - side))
-            if nxt is not None and len(chain) > trim + 2:
+            cut = nxt is not None and (i, 1 - side) not in tips
+            if cut and len(chain) > trim + 2:
                 del chain[len(chain) - trim:]
             if nxt is None:
                 break
