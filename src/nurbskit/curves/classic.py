@@ -130,11 +130,9 @@ def _graph(skel: np.ndarray):
     from scipy import ndimage
 
     pixels = [tuple(p) for p in np.argwhere(skel)]
-    degree = {p: sum(1 for _ in _neighbours(skel, *p)) for p in pixels}
-    special = np.zeros_like(skel)
-    for p, d in degree.items():
-        if d != 2:
-            special[p] = True
+    # 8-neighbour counts of all pixels at once (a 3 x 3 box sum less the pixel itself).
+    degree = ndimage.convolve(skel.astype(np.uint8), np.ones((3, 3), np.uint8), mode="constant") - 1
+    special = skel & (degree != 2)
     labels, n = ndimage.label(special, structure=np.ones((3, 3)))
     node_of = {p: int(labels[p]) - 1 for p in pixels if labels[p] > 0}
     nodes = [[] for _ in range(n)]
@@ -206,10 +204,13 @@ def _fill_slivers(ink: np.ndarray) -> np.ndarray:
     holes = ndimage.binary_fill_holes(ink) & ~ink
     if not holes.any():
         return ink
-    labels, n = ndimage.label(holes)
-    depth = np.asarray(ndimage.maximum(ndimage.distance_transform_edt(holes), labels, np.arange(1, n + 1)))
-    thin = np.concatenate([[False], depth <= _SLIVER])
-    return ink | thin[labels]
+    labels, _ = ndimage.label(holes)
+    out = ink.copy()
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        hole = np.pad(labels[box] == k, 1)  # the distance transform of each hole on its own box
+        if ndimage.distance_transform_edt(hole).max() <= _SLIVER:
+            out[box] |= hole[1:-1, 1:-1]
+    return out
 
 
 # Good continuation at a junction (cosines of the branches' directions, each pointing away
@@ -347,6 +348,10 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
+    # Work on the ink's bounding box (with a margin): drawings are mostly background.
+    rows, cols = np.nonzero(ink)
+    r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
+    ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
     skel = skeletonize(_fill_slivers(ink))
     if width is None:
         dt = ndimage.distance_transform_edt(ink)
@@ -426,7 +431,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     out = []
     for chain in strokes:
         # Drop consecutive duplicates; (row, col) -> pixel centre (x, y).
-        pts = np.array(chain, dtype=float)[:, ::-1] + 0.5
+        pts = np.array(chain, dtype=float)[:, ::-1] + (c0 + 0.5, r0 + 0.5)
         keep = np.ones(len(pts), bool)
         keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
         pts = pts[keep]
@@ -436,16 +441,21 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
 
 
 def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_ctrl: int | None = None,
-               corrections: int = 3):
+               corrections: int = 3, measure: bool = True):
     """A clamped B-spline through ordered ``points (N, 2)`` within ``tolerance`` (max distance).
 
-    Least squares on chord-length parameters, then ``corrections`` rounds of parameter
-    correction by projection. The number of control points (``degree + 1`` to
-    ``max_ctrl``, default ``N // 2``) is the smallest whose fit after one correction has
+    Least squares on chord-length parameters, then ``corrections`` rounds of Hoschek's
+    parameter correction ("intrinsic parametrisation", The NURBS Book, section 9.4.1):
+    each parameter moves by the first-order step ``du = (p - C(u)) . C'(u) / |C'(u)|^2``
+    towards its foot point, from the basis matrix and its derivative
+    (``nurbskit.core.basis.basis_matrix``, one dense ``(N, n)`` product, no per-point
+    search). The number of control points (``degree + 1`` to ``max_ctrl``, default
+    about one per 3 px of stroke) is the smallest whose fit after one correction has
     every residual within ``tolerance``, found by bisection (the residual at the
     corrected parameters bounds the distance to the curve from above, and falls as
-    control points are added). Returns ``(curve, max_distance)``, the distance by
-    projection.
+    control points are added). Returns ``(curve, max_distance)``: the distance by
+    projection (``nurbskit.core.project.project_points_curve``) when ``measure``, else
+    the residual bound.
     """
     import torch
 
@@ -465,47 +475,65 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
         max_ctrl = min(n_pts // 4, int(length / 3) + degree)
     max_ctrl = max(degree + 1, min(max_ctrl, n_pts))
 
-    def solve(n_ctrl, u):
-        knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
-        B = basis_matrix(knots, degree, n_ctrl, u)
+    def solve(n_ctrl, B):
         # A faint second-difference penalty on the control polygon keeps spans with few
         # or no points well posed (no wild control points), and changes nothing else.
         D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0) * _SMOOTH
-        A = torch.cat([B, D])
-        rhs = torch.cat([pts, pts.new_zeros(len(D), 2)])
-        cp = torch.linalg.lstsq(A, rhs).solution.contiguous()
+        # Normal equations (n x n, Cholesky): B is (N, n) with N >> n, and the penalty
+        # keeps B^T B + D^T D positive definite.
+        cp = torch.cholesky_solve(B.T @ pts, torch.linalg.cholesky(B.T @ B + D.T @ D)).contiguous()
         if closed:
             cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
-        return NURBSCurve(cp, degree=degree), B @ cp
+        return cp
 
-    def corrected(curve, u):
-        # Foot-point parameters, kept in order: a foot point behind its predecessor would fold the fit.
-        # Warm start at the current parameters (no grid search): the correction follows the
-        # stroke's order, and each Newton start is already near its foot point.
-        t = project_points_curve(curve, pts, params=u, iterations=8).params.detach().clamp(0, 1)
-        t = torch.cummax(t, 0).values
+    def corrected(B, cp, u):
+        at, tangent = B[0] @ cp, B[1] @ cp
+        du = ((pts - at) * tangent).sum(1) / (tangent * tangent).sum(1).clamp_min(1e-12)
+        # Kept in order (a parameter behind its predecessor would fold the fit), ends fixed.
+        t = torch.cummax((u + du).clamp(0, 1), 0).values
         return torch.cat([t.new_zeros(1), t[1:-1], t.new_ones(1)])
 
     def fit(n_ctrl, rounds):
+        knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
         u = u_chord
-        curve, at_u = solve(n_ctrl, u)
+        B = basis_matrix(knots, degree, n_ctrl, u, order=1)  # (2, N, n): values and first derivatives
+        cp = solve(n_ctrl, B[0])
+        best = (cp, u, float(torch.linalg.norm(B[0] @ cp - pts, dim=1).max()))
         for _ in range(rounds):
-            u = corrected(curve, u)
-            curve, at_u = solve(n_ctrl, u)
-        return curve, float(torch.linalg.norm(at_u - pts, dim=1).max())
+            u = corrected(B, cp, u)
+            B = basis_matrix(knots, degree, n_ctrl, u, order=1)
+            cp = solve(n_ctrl, B[0])
+            bound = float(torch.linalg.norm(B[0] @ cp - pts, dim=1).max())
+            if not bound < best[2]:  # a correction that does not help ends the rounds
+                break
+            best = (cp, u, bound)
+        return best
 
-    lo, hi = degree + 1, max_ctrl
-    if fit(lo, 1)[1] <= tolerance:
-        hi = lo
+    # Galloping, then bisection: most strokes need few control points, so the probes
+    # stay small (degree + 1, then doubling) until one fits.
+    bounds = {}
+
+    def probe(n_ctrl):
+        bounds[n_ctrl] = fit(n_ctrl, 1)[2]
+        return bounds[n_ctrl]
+
+    lo, hi = degree + 1, degree + 1
+    while hi < max_ctrl and probe(hi) > tolerance:
+        lo, hi = hi + 1, min(2 * hi, max_ctrl)
     while lo < hi:  # the smallest n with a bound within tolerance (hi always fits or is the cap)
         mid = (lo + hi) // 2
-        if fit(mid, 1)[1] <= tolerance:
+        if probe(mid) <= tolerance:
             hi = mid
         else:
             lo = mid + 1
-    curve, _ = fit(hi, corrections)
-    distance = float(project_points_curve(curve, pts).distance.max())
-    return curve, distance
+    if bounds.get(hi, probe(hi)) > tolerance:  # nothing fits (a stroke too wiggly): the closest probe
+        hi = min(bounds, key=bounds.get)
+    cp, u, bound = fit(hi, corrections)
+    curve = NURBSCurve(cp, degree=degree)
+    if not measure:
+        return curve, bound
+    distance = float(project_points_curve(curve, pts, params=u, iterations=8).distance.max())
+    return curve, min(distance, bound)
 
 
 def _ink_points(ink: np.ndarray) -> np.ndarray:
@@ -601,7 +629,7 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
                 s[-1] = s[0]
         if s[0, 0] > s[-1, 0]:  # canonical orientation (as the synthetic targets): first point left of the last
             s = s[::-1].copy()
-        curve, _ = fit_stroke(s, tolerance)
+        curve, _ = fit_stroke(s, tolerance, measure=False)
         curves.append(curve)
     if refine_iterations:
         curves = refine(curves, ink, refine_iterations)
