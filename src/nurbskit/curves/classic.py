@@ -41,6 +41,8 @@ from ..errors import InputError, OptionError
 _SMOOTH = 1e-2
 # Gaussian smoothing (pixels, along the stroke) of the skeleton's staircase before fitting.
 _STROKE_SIGMA = 1.0
+# Junctions joined by an edge shorter than this many stroke widths are one junction.
+_MERGE = 5.0
 
 # The 8 neighbours of a pixel, as (drow, dcol).
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
@@ -353,8 +355,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
     ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
     skel = skeletonize(_fill_slivers(ink))
+    dt = ndimage.distance_transform_edt(ink)
     if width is None:
-        dt = ndimage.distance_transform_edt(ink)
         width = float(2 * np.median(dt[skel])) if skel.any() else 1.0
     nodes, edges = _graph(skel)
     short = max(2.0, 1.5 * width)
@@ -374,7 +376,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     is_junction = [len(nodes[k]) > 1 or sum(1 for _ in _neighbours(skel, *nodes[k][0])) >= 3 for k in range(len(nodes))]
     kept = []
     for a, b, path in edges:
-        if a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < max(3.0, 5.0 * width):
+        if a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < max(3.0, _MERGE * width):
             parent[find(a)] = find(b)
             continue
         kept.append((a, b, path))
@@ -388,6 +390,12 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
         ra, rb = (find(a) if a >= 0 else -1), (find(b) if b >= 0 else -1)
         spur = (ra >= 0 and rb >= 0 and ra != rb and min(degree[ra], degree[rb]) == 1
                 and max(degree[ra], degree[rb]) >= 3 and length(path) < short)
+        if spur:
+            # A spur of skeletonisation barely reaches out of the junction's disc (the ink's
+            # local radius there); a real branch of a thick stroke reaches well beyond.
+            end, root = (path[0], path[-1]) if degree[ra] == 1 else (path[-1], path[0])
+            # (Short branches of thin strokes, a few pixels, are spurs whatever their reach.)
+            spur = length(path) < 6.0 or length(path) + dt[end] < 2.0 * dt[root] + 1.0
         if not spur:
             pruned.append((ra, rb, path))
     edges = pruned
