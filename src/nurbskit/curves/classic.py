@@ -222,7 +222,7 @@ _STRAIGHT = -0.5
 # A hairpin or a near-tangent touch: two branches leaving a three-way junction within
 # about 75 degrees of each other (cosine >= 0.25), the third leaving on the other side
 # (at more than about 100 degrees from each).
-_PARALLEL = 0.25
+_PARALLEL = 0.0
 _OPPOSITE = -0.2
 
 
@@ -613,14 +613,15 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         tolerance: largest distance in pixels from a stroke's skeleton pixels to its curve.
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
-            the stroke width).
+            3 stroke widths + 4 px, the width taken at most 4 px).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
     strokes, width = trace_strokes(ink)
-    min_length = width if min_length is None else min_length
+    if min_length is None:  # pieces left between junctions and loose ends; capped for thick strokes
+        min_length = 3.0 * min(width, 4.0) + 4.0
     curves = []
     for s in strokes:
         if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
