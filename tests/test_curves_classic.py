@@ -90,3 +90,22 @@ def test_thin_holes_are_filled_and_loops_kept():
     assert filled[13, 8:52].all()
     assert not filled[28:33, 23:28].any()
     assert (filled & ~ink).sum() == 44
+
+
+def test_tracing_an_empty_mask_gives_no_strokes():
+    from nurbskit.curves.classic import trace_strokes
+
+    strokes, width = trace_strokes(np.zeros((16, 16), bool))
+    assert strokes == [] and width == 1.0
+
+
+def test_strokes_keep_image_coordinates_after_cropping():
+    # Ink far from the origin: the tracer works on the ink's bounding box, and the
+    # strokes must come back in the image's pixel coordinates.
+    ink = np.zeros((200, 300), bool)
+    ink[150:153, 120:280] = True  # a bar whose centre line is y = 151.5
+    from nurbskit.curves.classic import trace_strokes
+
+    [stroke], _ = trace_strokes(ink)
+    assert abs(float(np.median(stroke[:, 1])) - 151.5) < 0.51
+    assert stroke[:, 0].min() < 125 and stroke[:, 0].max() > 275

@@ -350,6 +350,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
+    if not ink.any():
+        return [], 1.0 if width is None else width
     # Work on the ink's bounding box (with a margin): drawings are mostly background.
     rows, cols = np.nonzero(ink)
     r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
