@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import gzip
+import os
 import statistics
 import sys
 import time
@@ -253,8 +254,10 @@ def report(summary: list[dict], args, skipped: dict[str, str]) -> str:
                          1000 * r["seconds_median"], "<= 300", "met" if r["cpu_median"] <= 0.3 else "missed"])
     lines += _table(["drawings", "images", "CPU ms median", "CPU ms p90", "ink ms", "trace ms", "fit ms",
                      "wall ms median", "goal (ms)", ""], rows)
+    load = ", ".join(f"{v:.0f}" for v in os.getloadavg())
     lines += ["CPU time (`time.process_time`, one thread) is the measure: the wall clock on this shared "
-              "2-core machine ran at a load average of 10-15 during the run and is given for reference. "
+              f"2-core machine (load averages {load} over 1, 5, 15 minutes at the end of the run) is given "
+              "for reference. "
               "Stages: medians of each stage timed on its own call.", ""]
     lines += ["## All sets", ""]
     rows = [[r["set"], r["images"], r["symmetric_mean"], r["symmetric_median"], r["symmetric_p90"],
