@@ -283,7 +283,8 @@ def main() -> None:
             row, image, curves = synthetic_row(i, n_curves, 128)
             rows.append(row)
             if i < 2:
-                examples.append((f"synthetic {n_curves}: {row['curves']} found, {row['symmetric']:.2f} px", image, curves))
+                title = f"synthetic {n_curves}: {row['curves']} found, {row['symmetric']:.2f} px"
+                examples.append((title, image, curves))
     for n_curves in (1, 2, 3):  # the same images with Chamfer refinement against the ink
         for i in range(args.refined):
             rows.append(synthetic_row(i, n_curves, 128, refine=20)[0])
@@ -302,7 +303,8 @@ def main() -> None:
         skipped["MNIST test x4"] = f"{MNIST} is missing"
     sk = sklearn_digits(args.mnist)
     if sk is None:
-        skipped["scikit-learn digits x14"] = "scikit-learn is not installed in this environment (not a nurbskit dependency)"
+        skipped["scikit-learn digits x14"] = ("scikit-learn is not installed in this environment "
+                                              "(not a nurbskit dependency)")
     else:
         for i, d in enumerate(sk):
             row, image, curves = digit_row(i, d, 14, "scikit-learn digits x14")

@@ -378,7 +378,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     is_junction = [len(nodes[k]) > 1 or sum(1 for _ in _neighbours(skel, *nodes[k][0])) >= 3 for k in range(len(nodes))]
     kept = []
     for a, b, path in edges:
-        if a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < max(3.0, _MERGE * width):
+        if (a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b]
+                and length(path) < max(3.0, _MERGE * width)):
             parent[find(a)] = find(b)
             continue
         kept.append((a, b, path))
