@@ -5,14 +5,16 @@ Steps (each a library call where one exists):
 1. Ink: the image in grey; Otsu's threshold (``skimage.filters.threshold_otsu``) splits it
    in two classes, and the smaller class is the ink, so dark on light and light on dark
    both work (drawings are mostly background).
-2. Skeleton: ``skimage.morphology.skeletonize`` (Zhang-Suen) of the ink mask.
+2. Skeleton: ``skimage.morphology.skeletonize`` (Zhang-Suen) of the ink mask, its thin
+   holes (slivers between strokes running side by side) filled first.
 3. Strokes: the skeleton as an 8-connected pixel graph; endpoints (one neighbour) and
    junctions (three or more; adjacent junction pixels are one junction) are its nodes,
    the pixel chains between them its edges. Spurs shorter than the stroke width are
    pruned, and junctions joined by an edge shorter than the stroke width merged (a thick
-   "X" skeletonises into two "Y"s). At each junction the branches are paired by the
-   straightest continuation (greedily, most nearly opposite directions first), so an "X"
-   gives two strokes and a "T" one stroke and one branch.
+   "X" skeletonises into two "Y"s). At each junction the branches are rejoined by good
+   continuation (see ``_pair_ends``): an "X" gives two strokes, a "T" its bar and its
+   stem, a curve crossing itself one stroke, a hairpin (a curve turning back on itself)
+   one stroke, two curves touching near-tangentially two strokes sharing the stretch.
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -39,6 +41,8 @@ from ..errors import InputError, OptionError
 _SMOOTH = 1e-2
 # Gaussian smoothing (pixels, along the stroke) of the skeleton's staircase before fitting.
 _STROKE_SIGMA = 1.0
+# Junctions joined by an edge shorter than this many stroke widths are one junction.
+_MERGE = 5.0
 
 # The 8 neighbours of a pixel, as (drow, dcol).
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
@@ -128,11 +132,9 @@ def _graph(skel: np.ndarray):
     from scipy import ndimage
 
     pixels = [tuple(p) for p in np.argwhere(skel)]
-    degree = {p: sum(1 for _ in _neighbours(skel, *p)) for p in pixels}
-    special = np.zeros_like(skel)
-    for p, d in degree.items():
-        if d != 2:
-            special[p] = True
+    # 8-neighbour counts of all pixels at once (a 3 x 3 box sum less the pixel itself).
+    degree = ndimage.convolve(skel.astype(np.uint8), np.ones((3, 3), np.uint8), mode="constant") - 1
+    special = skel & (degree != 2)
     labels, n = ndimage.label(special, structure=np.ones((3, 3)))
     node_of = {p: int(labels[p]) - 1 for p in pixels if labels[p] > 0}
     nodes = [[] for _ in range(n)]
@@ -186,14 +188,177 @@ def _direction(pixels: list, reach: int) -> np.ndarray:
     return d / n if n > 0 else d
 
 
+# Holes in the ink at most this deep (pixels from their edge to their middle) are filled.
+_SLIVER = 1.5
+
+
+def _fill_slivers(ink: np.ndarray) -> np.ndarray:
+    """The ink mask with its thin holes filled -> ``(H, W)`` bool.
+
+    Where a curve turns back close to itself (a hairpin) or two strokes run side by side,
+    the background between them is a sliver a pixel or two wide; its skeleton would be a
+    thin cycle of two parallel branches. A hole no deeper than ``_SLIVER`` px (the
+    largest distance from a hole pixel to the ink, ``scipy.ndimage.distance_transform_edt``)
+    is ink; real loops of a curve enclose more.
+    """
+    from scipy import ndimage
+
+    holes = ndimage.binary_fill_holes(ink) & ~ink
+    if not holes.any():
+        return ink
+    labels, _ = ndimage.label(holes)
+    out = ink.copy()
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        hole = np.pad(labels[box] == k, 1)  # the distance transform of each hole on its own box
+        if ndimage.distance_transform_edt(hole).max() <= _SLIVER:
+            out[box] |= hole[1:-1, 1:-1]
+    return out
+
+
+# Good continuation at a junction (cosines of the branches' directions, each pointing away
+# from the junction): two branches continue each other when they leave it in nearly
+# opposite directions (turning by at most 60 degrees: cosine <= -0.5).
+_STRAIGHT = -0.5
+# A hairpin or a near-tangent touch: two branches leaving a three-way junction within
+# about 75 degrees of each other (cosine >= 0.25), the third leaving on the other side
+# (at more than about 100 degrees from each).
+_PARALLEL = 0.0
+_OPPOSITE = -0.2
+
+
+def _pair_ends(edges: list, reach: int) -> tuple[dict, set]:
+    """Which edge continues which through each node of the stroke graph (good continuation).
+
+    ``edges`` is a list of ``(a, b, pixels)`` (node ids, ``-1`` for none; ``pixels`` from
+    ``a`` to ``b`` as ``(row, col)``); an edge end is ``(edge index, side)``, side 0 at
+    ``a`` and 1 at ``b``. Returns ``partner`` (end -> end: a stroke leaving through the
+    first end comes back in through the second) and ``tips``, the ends joined at a
+    hairpin's tip (no trimming there). Edges that two curves share are appended to
+    ``edges`` as a second copy.
+
+    The rules, in order, at each node (the Gestalt rule of good continuation, as in
+    vectorisation of line drawings, e.g. Noris et al., "Topology-driven vectorization of
+    clean line drawings", ACM TOG 2013):
+
+    - Shared edge: at a three-way junction where two branches leave within about 75
+      degrees of each other and the third (the stem) on the other side, two strokes run
+      along the stem. Either it ends there (a dead end: a hairpin, a curve turning back
+      sharply, whose two sides merged into one skeleton line), and the two copies are
+      joined at its tip, one curve; or its other end is a three-way junction of the same
+      shape (two curves touching near-tangentially over a stretch), and the copies
+      continue into the branches there, each into the one that turns least.
+    - Otherwise the branches are paired greedily, most nearly opposite directions
+      first, each turn at most 60 degrees: an "X" gives two strokes, a "T" its bar and
+      its stem. A node with only two branches passes through, whatever the turn.
+    - The two ends of a loop (an edge from a junction back to itself) always continue
+      into other branches when any are left: a curve crossing itself stays one stroke.
+    """
+    at: dict[int, list] = {}
+    for i, (a, b, _) in enumerate(edges):
+        if a >= 0:
+            at.setdefault(a, []).append((i, 0))
+        if b >= 0:
+            at.setdefault(b, []).append((i, 1))
+
+    def direction(end):
+        path = edges[end[0]][2]
+        return _direction(path if end[1] == 0 else path[::-1], reach)
+
+    def other(end):
+        a, b, _ = edges[end[0]]
+        return b if end[1] == 0 else a
+
+    dirs = {end: direction(end) for ends in at.values() for end in ends}
+    cos = lambda e, f: float(dirs[e] @ dirs[f])  # noqa: E731
+
+    def fork(k, stem):
+        """The two other ends at three-way junction ``k`` if they fork away from ``stem``, else None."""
+        ends = at.get(k, [])
+        if len(ends) != 3 or stem not in ends:
+            return None
+        f, g = [e for e in ends if e != stem]
+        if f[0] == g[0] or stem[0] in (f[0], g[0]):
+            return None
+        if cos(f, g) >= _PARALLEL and cos(stem, f) <= _OPPOSITE and cos(stem, g) <= _OPPOSITE:
+            return f, g
+        return None
+
+    partner, tips, done = {}, set(), set()
+
+    def link(e, f):
+        partner[e], partner[f] = f, e
+
+    # Shared edges first, the most nearly parallel forks first.
+    candidates = []
+    for k, ends in at.items():
+        for stem in ends:
+            pair = fork(k, stem)
+            if pair is not None:
+                candidates.append((-cos(*pair), k, stem, pair))
+    candidates.sort(key=lambda t: t[0])
+    for _, k, stem, (f, g) in candidates:
+        if k in done:
+            continue
+        i, side = stem
+        a, b, path = edges[i]
+        if a == b:
+            continue
+        o = other(stem)
+        far = (i, 1 - side)
+        if o >= 0 and o not in done and len(at[o]) == 1:  # a hairpin: the copies meet at the tip
+            j = len(edges)
+            edges.append((a, b, path))
+            link(f, (i, side))
+            link(g, (j, side))
+            link(far, (j, 1 - side))
+            tips.update({far, (j, 1 - side)})
+            done.update({k, o})
+            continue
+        pair2 = fork(o, far) if o >= 0 and o not in done else None
+        if pair2 is not None:  # two curves touching along the stem
+            j = len(edges)
+            edges.append((a, b, path))
+            f2, g2 = pair2
+            if cos(f, f2) > cos(f, g2):  # f continues into the branch most nearly opposite to it
+                f2, g2 = g2, f2
+            link(f, (i, side))
+            link(g, (j, side))
+            link(f2, far)
+            link(g2, (j, 1 - side))
+            done.update({k, o})
+
+    for k, ends in at.items():
+        if k in done:
+            continue
+        if len(ends) == 2 and ends[0][0] != ends[1][0]:
+            link(*ends)  # a pruned spur or a corner: the stroke passes through
+            continue
+        pairs = sorted((cos(e, f), e, f) for x, e in enumerate(ends) for f in ends[x + 1:] if e[0] != f[0])
+        for c, e, f in pairs:
+            if e not in partner and f not in partner and c <= _STRAIGHT:
+                link(e, f)
+        # A loop's ends continue into any branches left (a curl: the curve crosses itself).
+        for c, e, f in pairs:
+            loop = edges[e[0]][0] == edges[e[0]][1] or edges[f[0]][0] == edges[f[0]][1]
+            if loop and e not in partner and f not in partner:
+                link(e, f)
+    return partner, tips
+
+
 def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.ndarray], float]:
     """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width."""
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
-    skel = skeletonize(ink)
+    if not ink.any():
+        return [], 1.0 if width is None else width
+    # Work on the ink's bounding box (with a margin): drawings are mostly background.
+    rows, cols = np.nonzero(ink)
+    r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
+    ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
+    skel = skeletonize(_fill_slivers(ink))
+    dt = ndimage.distance_transform_edt(ink)
     if width is None:
-        dt = ndimage.distance_transform_edt(ink)
         width = float(2 * np.median(dt[skel])) if skel.any() else 1.0
     nodes, edges = _graph(skel)
     short = max(2.0, 1.5 * width)
@@ -213,7 +378,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     is_junction = [len(nodes[k]) > 1 or sum(1 for _ in _neighbours(skel, *nodes[k][0])) >= 3 for k in range(len(nodes))]
     kept = []
     for a, b, path in edges:
-        if a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < max(3.0, 5.0 * width):
+        if (a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b]
+                and length(path) < max(3.0, _MERGE * width)):
             parent[find(a)] = find(b)
             continue
         kept.append((a, b, path))
@@ -227,59 +393,39 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
         ra, rb = (find(a) if a >= 0 else -1), (find(b) if b >= 0 else -1)
         spur = (ra >= 0 and rb >= 0 and ra != rb and min(degree[ra], degree[rb]) == 1
                 and max(degree[ra], degree[rb]) >= 3 and length(path) < short)
+        if spur:
+            # A spur of skeletonisation barely reaches out of the junction's disc (the ink's
+            # local radius there); a real branch of a thick stroke reaches well beyond.
+            end, root = (path[0], path[-1]) if degree[ra] == 1 else (path[-1], path[0])
+            # (Short branches of thin strokes, a few pixels, are spurs whatever their reach.)
+            spur = length(path) < 6.0 or length(path) + dt[end] < 2.0 * dt[root] + 1.0
         if not spur:
             pruned.append((ra, rb, path))
     edges = pruned
 
-    # Ends of edges at each junction, and their pairing by straightest continuation.
-    reach = int(max(4, 2 * width))
-    at = {}
-    for i, (a, b, path) in enumerate(edges):
-        if a >= 0:
-            at.setdefault(a, []).append((i, 0))
-        if b >= 0:
-            at.setdefault(b, []).append((i, 1))
-    partner = {}
-    for k, ends in at.items():
-        if len(ends) < 2:
-            continue
-        dirs = {}
-        for i, side in ends:
-            path = edges[i][2]
-            dirs[(i, side)] = _direction(path if side == 0 else path[::-1], reach)
-        pairs = []
-        for x in range(len(ends)):
-            for y in range(x + 1, len(ends)):
-                e, f = ends[x], ends[y]
-                if e[0] == f[0]:
-                    continue  # both ends of one edge (a loop back to the junction)
-                pairs.append((float(dirs[e] @ dirs[f]), e, f))  # -1: straight through
-        pairs.sort(key=lambda t: t[0])
-        # Two branches left (a pruned spur, a corner): the stroke passes through, whatever the turn.
-        limit = 1.0 if len(ends) == 2 else -0.5
-        for cos, e, f in pairs:
-            if e in partner or f in partner or cos > limit:  # turning by more than 60 degrees: no
-                continue
-            partner[e], partner[f] = f, e
+    partner, tips = _pair_ends(edges, int(max(4, 2 * width)))
 
     # Chain edges into strokes.
     used, strokes = set(), []
 
     # Near a junction the skeleton bends towards it (the medial axis of a crossing is not
     # the two centre lines): through a junction, the last pixels of each branch are left
-    # out and the spline bridges the gap.
+    # out and the spline bridges the gap. Not at a hairpin's tip, which is the stroke's own end.
     trim = int(np.ceil(width))
 
     def walk(i, side):
-        chain = []
+        chain, cut = [], False
         while i not in used:
             used.add(i)
             path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
-            if chain:  # arriving through a junction
+            if chain and cut:  # arriving through a junction
                 path = path[min(trim, max(0, len(path) - 2)) + 1:]
+            elif chain:
+                path = path[1:]
             chain.extend(path)
             nxt = partner.get((i, 1 - side))
-            if nxt is not None and len(chain) > trim + 2:
+            cut = nxt is not None and (i, 1 - side) not in tips
+            if cut and len(chain) > trim + 2:
                 del chain[len(chain) - trim:]
             if nxt is None:
                 break
@@ -296,7 +442,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     out = []
     for chain in strokes:
         # Drop consecutive duplicates; (row, col) -> pixel centre (x, y).
-        pts = np.array(chain, dtype=float)[:, ::-1] + 0.5
+        pts = np.array(chain, dtype=float)[:, ::-1] + (c0 + 0.5, r0 + 0.5)
         keep = np.ones(len(pts), bool)
         keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
         pts = pts[keep]
@@ -306,16 +452,21 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
 
 
 def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_ctrl: int | None = None,
-               corrections: int = 3):
+               corrections: int = 3, measure: bool = True):
     """A clamped B-spline through ordered ``points (N, 2)`` within ``tolerance`` (max distance).
 
-    Least squares on chord-length parameters, then ``corrections`` rounds of parameter
-    correction by projection. The number of control points (``degree + 1`` to
-    ``max_ctrl``, default ``N // 2``) is the smallest whose fit after one correction has
+    Least squares on chord-length parameters, then ``corrections`` rounds of Hoschek's
+    parameter correction ("intrinsic parametrisation", The NURBS Book, section 9.4.1):
+    each parameter moves by the first-order step ``du = (p - C(u)) . C'(u) / |C'(u)|^2``
+    towards its foot point, from the basis matrix and its derivative
+    (``nurbskit.core.basis.basis_matrix``, one dense ``(N, n)`` product, no per-point
+    search). The number of control points (``degree + 1`` to ``max_ctrl``, default
+    about one per 3 px of stroke) is the smallest whose fit after one correction has
     every residual within ``tolerance``, found by bisection (the residual at the
     corrected parameters bounds the distance to the curve from above, and falls as
-    control points are added). Returns ``(curve, max_distance)``, the distance by
-    projection.
+    control points are added). Returns ``(curve, max_distance)``: the distance by
+    projection (``nurbskit.core.project.project_points_curve``) when ``measure``, else
+    the residual bound.
     """
     import torch
 
@@ -335,47 +486,65 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
         max_ctrl = min(n_pts // 4, int(length / 3) + degree)
     max_ctrl = max(degree + 1, min(max_ctrl, n_pts))
 
-    def solve(n_ctrl, u):
-        knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
-        B = basis_matrix(knots, degree, n_ctrl, u)
+    def solve(n_ctrl, B):
         # A faint second-difference penalty on the control polygon keeps spans with few
         # or no points well posed (no wild control points), and changes nothing else.
         D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0) * _SMOOTH
-        A = torch.cat([B, D])
-        rhs = torch.cat([pts, pts.new_zeros(len(D), 2)])
-        cp = torch.linalg.lstsq(A, rhs).solution.contiguous()
+        # Normal equations (n x n, Cholesky): B is (N, n) with N >> n, and the penalty
+        # keeps B^T B + D^T D positive definite.
+        cp = torch.cholesky_solve(B.T @ pts, torch.linalg.cholesky(B.T @ B + D.T @ D)).contiguous()
         if closed:
             cp[0] = cp[-1] = (cp[0] + cp[-1]) / 2
-        return NURBSCurve(cp, degree=degree), B @ cp
+        return cp
 
-    def corrected(curve, u):
-        # Foot-point parameters, kept in order: a foot point behind its predecessor would fold the fit.
-        # Warm start at the current parameters (no grid search): the correction follows the
-        # stroke's order, and each Newton start is already near its foot point.
-        t = project_points_curve(curve, pts, params=u, iterations=8).params.detach().clamp(0, 1)
-        t = torch.cummax(t, 0).values
+    def corrected(B, cp, u):
+        at, tangent = B[0] @ cp, B[1] @ cp
+        du = ((pts - at) * tangent).sum(1) / (tangent * tangent).sum(1).clamp_min(1e-12)
+        # Kept in order (a parameter behind its predecessor would fold the fit), ends fixed.
+        t = torch.cummax((u + du).clamp(0, 1), 0).values
         return torch.cat([t.new_zeros(1), t[1:-1], t.new_ones(1)])
 
     def fit(n_ctrl, rounds):
+        knots = clamped_uniform(n_ctrl, degree, dtype=torch.float64)
         u = u_chord
-        curve, at_u = solve(n_ctrl, u)
+        B = basis_matrix(knots, degree, n_ctrl, u, order=1)  # (2, N, n): values and first derivatives
+        cp = solve(n_ctrl, B[0])
+        best = (cp, u, float(torch.linalg.norm(B[0] @ cp - pts, dim=1).max()))
         for _ in range(rounds):
-            u = corrected(curve, u)
-            curve, at_u = solve(n_ctrl, u)
-        return curve, float(torch.linalg.norm(at_u - pts, dim=1).max())
+            u = corrected(B, cp, u)
+            B = basis_matrix(knots, degree, n_ctrl, u, order=1)
+            cp = solve(n_ctrl, B[0])
+            bound = float(torch.linalg.norm(B[0] @ cp - pts, dim=1).max())
+            if not bound < best[2]:  # a correction that does not help ends the rounds
+                break
+            best = (cp, u, bound)
+        return best
 
-    lo, hi = degree + 1, max_ctrl
-    if fit(lo, 1)[1] <= tolerance:
-        hi = lo
+    # Galloping, then bisection: most strokes need few control points, so the probes
+    # stay small (degree + 1, then doubling) until one fits.
+    bounds = {}
+
+    def probe(n_ctrl):
+        bounds[n_ctrl] = fit(n_ctrl, 1)[2]
+        return bounds[n_ctrl]
+
+    lo, hi = degree + 1, degree + 1
+    while hi < max_ctrl and probe(hi) > tolerance:
+        lo, hi = hi + 1, min(2 * hi, max_ctrl)
     while lo < hi:  # the smallest n with a bound within tolerance (hi always fits or is the cap)
         mid = (lo + hi) // 2
-        if fit(mid, 1)[1] <= tolerance:
+        if probe(mid) <= tolerance:
             hi = mid
         else:
             lo = mid + 1
-    curve, _ = fit(hi, corrections)
-    distance = float(project_points_curve(curve, pts).distance.max())
-    return curve, distance
+    if bounds.get(hi, probe(hi)) > tolerance:  # nothing fits (a stroke too wiggly): the closest probe
+        hi = min(bounds, key=bounds.get)
+    cp, u, bound = fit(hi, corrections)
+    curve = NURBSCurve(cp, degree=degree)
+    if not measure:
+        return curve, bound
+    distance = float(project_points_curve(curve, pts, params=u, iterations=8).distance.max())
+    return curve, min(distance, bound)
 
 
 def _ink_points(ink: np.ndarray) -> np.ndarray:
@@ -447,14 +616,15 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         tolerance: largest distance in pixels from a stroke's skeleton pixels to its curve.
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
-            the stroke width).
+            3 stroke widths + 4 px, the width taken at most 4 px).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
     strokes, width = trace_strokes(ink)
-    min_length = width if min_length is None else min_length
+    if min_length is None:  # pieces left between junctions and loose ends; capped for thick strokes
+        min_length = 3.0 * min(width, 4.0) + 4.0
     curves = []
     for s in strokes:
         if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
@@ -471,7 +641,7 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
                 s[-1] = s[0]
         if s[0, 0] > s[-1, 0]:  # canonical orientation (as the synthetic targets): first point left of the last
             s = s[::-1].copy()
-        curve, _ = fit_stroke(s, tolerance)
+        curve, _ = fit_stroke(s, tolerance, measure=False)
         curves.append(curve)
     if refine_iterations:
         curves = refine(curves, ink, refine_iterations)
