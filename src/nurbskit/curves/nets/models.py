@@ -68,6 +68,12 @@ class Encoder(nn.Module):
         return tokens, tokens.mean(1)
 
 
+def token_centres(tokens: Tensor) -> Tensor:
+    """The centres ``(L, 2)`` in the unit square of the cells of a square feature map's tokens ``(B, L, D)``."""
+    n = int(round(tokens.shape[1] ** 0.5))
+    return Encoder._grid(n, 1, tokens)[0].flatten(1).T
+
+
 class Attention(nn.Module):
     """Soft attention (paper eq. 11-14): weight ``a_i = softmax_i f([v_i, h])``, ``f`` a 2-layer ReLU MLP.
 
@@ -80,33 +86,39 @@ class Attention(nn.Module):
         self.h = nn.Linear(hidden, inner, bias=False)
         self.out = nn.Linear(inner, 1)
 
-    def forward(self, tokens: Tensor, h: Tensor, keys: Tensor | None = None) -> Tensor:
+    def forward(self, tokens: Tensor, h: Tensor, keys: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """-> context ``(B, D)``, weights ``(B, L)``."""
         keys = self.v(tokens) if keys is None else keys
-        score = self.out(F.relu(keys + self.h(h)[:, None])).squeeze(-1)  # (B, L)
-        return torch.einsum("bl,bld->bd", score.softmax(-1), tokens)
+        weights = self.out(F.relu(keys + self.h(h)[:, None])).squeeze(-1).softmax(-1)  # (B, L)
+        return torch.einsum("bl,bld->bd", weights, tokens), weights
 
 
 class PointDecoder(nn.Module):
     """A point GRU: from a start state, control points ``(B, T, 2)`` and stop logits ``(B, T, 2)``."""
 
-    def __init__(self, dim: int, hidden: int, code: int = 0):
+    def __init__(self, dim: int, hidden: int, code: int = 0, pointer: bool = True):
         super().__init__()
+        self.pointer = pointer
         self.attend = Attention(dim, hidden)
         self.cell = nn.GRUCell(dim + code + 3, hidden)
-        self.head = _mlp(hidden, hidden, 4)
+        self.head = _mlp(hidden + dim, hidden, 4)
 
     def forward(self, tokens: Tensor, h: Tensor, steps: int, code: Tensor | None = None) -> tuple[Tensor, Tensor]:
         b = tokens.shape[0]
+        centres = token_centres(tokens)
         keys = self.attend.v(tokens)
         prev = tokens.new_zeros(b, 3)
         prev[:, 2] = 1.0  # the start flag
         points, stops = [], []
         for _ in range(steps):
-            ctx = self.attend(tokens, h, keys)
+            ctx, a = self.attend(tokens, h, keys)
             x = torch.cat([ctx, prev] if code is None else [ctx, code, prev], 1)
             h = self.cell(x, h)
-            out = self.head(h)
-            p = torch.sigmoid(out[:, :2])
+            out = self.head(torch.cat([h, ctx], 1))
+            if self.pointer:  # where the attention looks, plus an offset: a strong prior for points near ink
+                p = (torch.einsum("bl,lc->bc", a, centres) + 0.5 * torch.tanh(out[:, :2])).clamp(0, 1)
+            else:
+                p = torch.sigmoid(out[:, :2])
             points.append(p)
             stops.append(out[:, 2:])
             prev = torch.cat([p.detach(), p.new_zeros(b, 1)], 1)
@@ -121,11 +133,11 @@ class PointModel(nn.Module):
 
     mode = "V"
 
-    def __init__(self, width: int = 32, dim: int = 96, hidden: int = 128):
+    def __init__(self, width: int = 32, dim: int = 96, hidden: int = 128, pointer: bool = True):
         super().__init__()
         self.encoder = Encoder(width, dim)
         self.init = nn.Linear(dim, hidden)
-        self.points = PointDecoder(dim, hidden)
+        self.points = PointDecoder(dim, hidden, pointer=pointer)
 
     def forward(self, ink: Tensor, steps: int) -> tuple[Tensor, Tensor]:
         tokens, g = self.encoder(ink)
@@ -135,6 +147,8 @@ class PointModel(nn.Module):
 class MultiCurveModel(nn.Module):
     """M: several curves of ``n_points`` control points each (paper 4.2).
 
+    Each curve step reads the feature map through ``n_points`` attention heads, one per
+    control point; a point is where its head looks plus an offset (as in the point decoder).
     ``forward(ink, curves) -> (points (B, curves, n_points, 2), curve-stop logits (B, curves, 2))``.
     """
 
@@ -145,24 +159,31 @@ class MultiCurveModel(nn.Module):
         self.n_points = n_points
         self.encoder = Encoder(width, dim)
         self.init = nn.Linear(dim, hidden)
-        self.attend = Attention(dim, hidden)
+        self.keys = nn.Linear(dim, 64)
+        self.query = nn.Linear(hidden, 64, bias=False)
+        self.score = nn.Linear(64, n_points)
+        self.mix = nn.Linear(n_points * dim, dim)
         self.cell = nn.GRUCell(dim + 2 * n_points, hidden)
-        self.head = _mlp(hidden, hidden, 2 * n_points + 2)
+        self.head = _mlp(hidden + dim, hidden, 2 * n_points + 2)
 
     def forward(self, ink: Tensor, curves: int) -> tuple[Tensor, Tensor]:
         tokens, g = self.encoder(ink)
         b = ink.shape[0]
+        centres = token_centres(tokens)
         h = torch.tanh(self.init(g))
-        keys = self.attend.v(tokens)
+        keys = self.keys(tokens)
         prev = tokens.new_zeros(b, 2 * self.n_points)
         points, stops = [], []
         for _ in range(curves):
-            h = self.cell(torch.cat([self.attend(tokens, h, keys), prev], 1), h)
-            out = self.head(h)
-            p = torch.sigmoid(out[:, : 2 * self.n_points])
-            points.append(p.view(b, self.n_points, 2))
+            a = self.score(F.relu(keys + self.query(h)[:, None])).softmax(1)  # (B, L, n_points)
+            ctx = F.relu(self.mix(torch.einsum("blp,bld->bpd", a, tokens).flatten(1)))
+            h = self.cell(torch.cat([ctx, prev], 1), h)
+            out = self.head(torch.cat([h, ctx], 1))
+            where = torch.einsum("blp,lc->bpc", a, centres)
+            p = (where + 0.5 * torch.tanh(out[:, : 2 * self.n_points].view(b, self.n_points, 2))).clamp(0, 1)
+            points.append(p)
             stops.append(out[:, 2 * self.n_points:])
-            prev = p.detach()
+            prev = p.detach().flatten(1)
         return torch.stack(points, 1), torch.stack(stops, 1)
 
 
@@ -196,7 +217,7 @@ class HierarchicalModel(nn.Module):
         prev = tokens.new_zeros(b, self.code)
         codes, stops = [], []
         for _ in range(curves):
-            h = self.cell(torch.cat([self.attend(tokens, h, keys), prev], 1), h)
+            h = self.cell(torch.cat([self.attend(tokens, h, keys)[0], prev], 1), h)
             out = self.head(h)
             z = torch.tanh(out[:, : self.code])
             codes.append(z)
