@@ -3,7 +3,8 @@
 Convention: the input image (any size, dark on light or light on dark: detected as the
 classical path does, :func:`nurbskit.curves.classic.ink_mask`) is turned into ink in
 [0, 1] (0 the background's median grey, 1 the darkest ink), resized to the network's
-``S x S`` by area averaging (``skimage.transform.resize`` with anti-aliasing), and the
+``S x S`` by area averaging when larger (as the training images are,
+:func:`~.train.network_inputs`) and bilinearly when smaller, and the
 predicted control points ``(u, v)`` in the unit square map back to pixels as
 ``(u * W, v * H)`` (x to the right, y down, the origin at the top-left corner of the
 top-left pixel: the api's convention). Counts follow the stop probabilities: a curve or
@@ -45,15 +46,17 @@ def load_model(mode: str):
 
 def network_ink(grey: np.ndarray, size: int, inverted: bool = False) -> torch.Tensor:
     """``(H, W)`` grey in [0, 1] -> ink ``(1, 1, size, size)`` float32 (see the module's convention)."""
-    from skimage.transform import resize
+    from torch.nn import functional as F
 
     ink = grey if inverted else 1.0 - grey
     ink = np.asarray(ink, dtype=np.float64)
     lo, hi = float(np.median(ink)), float(ink.max())
-    ink = np.clip((ink - lo) / max(hi - lo, 1e-6), 0.0, 1.0)
-    if ink.shape != (size, size):
-        ink = np.clip(resize(ink, (size, size), order=1, anti_aliasing=True, mode="edge"), 0.0, 1.0)
-    return torch.as_tensor(ink, dtype=torch.float32)[None, None]
+    ink = torch.as_tensor(np.clip((ink - lo) / max(hi - lo, 1e-6), 0.0, 1.0), dtype=torch.float32)[None, None]
+    if ink.shape[-2:] != (size, size):
+        shrink = min(ink.shape[-2:]) >= size
+        ink = F.interpolate(ink, size=(size, size), mode="area" if shrink else "bilinear",
+                            align_corners=None if shrink else False)
+    return ink.clamp(0.0, 1.0)
 
 
 @torch.no_grad()
