@@ -177,6 +177,25 @@ def mnist(digits: np.ndarray, modes: list[str]):
     return summary, examples
 
 
+def _mode_of(row: dict) -> str | None:
+    if row.get("table") == "mnist":
+        parts = row["method"].split()
+        return parts[1] if len(parts) > 1 else None
+    return row.get("mode")
+
+
+def _merged(rows: list[dict], modes: list[str]) -> list[dict]:
+    """This run's rows plus the committed results' rows of the modes not run now (``--modes`` runs a subset)."""
+    import json
+
+    path = RESULTS / "curves_nets.json"
+    if not path.exists():
+        return rows
+    old = [r for r in json.loads(path.read_text())["rows"] if _mode_of(r) is not None and _mode_of(r) not in modes]
+    order = {"2": 0, "1": 1, "mnist": 2}
+    return sorted(rows + old, key=lambda r: (order[r["table"]], _mode_of(r) or "", r.get("method", "")))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=2000, help="held-out images per mode (table 2)")
@@ -192,6 +211,7 @@ def main() -> None:
     for mode in modes:
         row, images = table2(mode, args.count)
         row["inference_ms"], row["inference_cpu_ms"] = speed(mode)
+        row["load_average"] = os.getloadavg()[0]
         t2.append(row)
         t1.append(table1(mode, images, args.refine, rng))
         print(row, t1[-1], flush=True)
@@ -202,6 +222,7 @@ def main() -> None:
             figure(ex, RESULTS / "curves_nets_figures" / f"mnist_{m.lower()}.png")
     rows = ([dict(r, table="2") for r in t2] + [dict(r, table="1", method="refinement") for r in t1]
             + [dict(r, table="mnist") for r in digits_summary])
+    rows = _merged(rows, modes)
     notes = ("Table 2: held-out synthetic drawings, 128 px, seed 777; the paper's numbers in the paper_ columns, "
              "goal: MSE <= 1.5 x the paper's, MV point accuracy >= 0.90 and curve accuracy >= 0.995. "
              "Table 1: Chamfer in pixels to the true curves; goal: network-initialised refinement <= 0.5 x the "
