@@ -128,9 +128,9 @@ def test_matched_loss_is_zero_for_a_shuffled_perfect_prediction():
     batch.counts[:] = 5
     ink, unit = network_inputs(batch, 32)
     _, parts = LOSSES["M"](_Oracle(unit, [2, 0, 1]), (ink, unit, batch.counts, batch.n_curves))
-    assert float(parts["mse"]) < 1e-12
+    assert float(parts["mse"].detach()) < 1e-12
     _, parts = LOSSES["M"](_Oracle(unit, [0, 0, 0]), (ink, unit, batch.counts, batch.n_curves))
-    assert float(parts["mse"]) > 1e-4
+    assert float(parts["mse"].detach()) > 1e-4
 
 
 def test_predicted_count_reads_the_first_stop():
