@@ -71,7 +71,6 @@ def predicted_count(stop_logits: Tensor, minimum: int = 1) -> Tensor:
 
     ``stop_logits (..., T, 2)`` -> ``(...)`` long in ``[minimum, T]`` (``T`` when none stops).
     """
-    t = stop_logits.shape[-2]
     stop = stop_logits.softmax(-1)[..., 1] > 0.5
     stop[..., : minimum - 1] = False
     stop[..., -1] = True
