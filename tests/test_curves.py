@@ -119,8 +119,8 @@ def test_blank_images_are_a_one_line_error():
         assert "\n" not in str(info.value)
     with pytest.raises(InputError, match="empty"):
         to_grey(np.zeros((0, 5)))
-    with pytest.raises(OptionError, match="not shipped"):
-        nurbskit.curves_from_image(_draw([KNOWN]), method="network")
+    with pytest.raises(OptionError, match="method"):
+        nurbskit.curves_from_image(_draw([KNOWN]), method="nope")
 
 
 def test_refinement_does_not_move_away_from_the_ink():

@@ -78,11 +78,14 @@ def test_curves_bad_images_are_one_line_errors(tmp_path, capsys, kind, expected)
     assert not (tmp_path / "o").exists()
 
 
-def test_curves_network_method_is_not_shipped(tmp_path, capsys):
+def test_curves_unknown_method_or_mode_is_a_usage_error(tmp_path, capsys):
     src = _write(tmp_path / "d.png", 1.0 - render([dense_samples(curve_of(KNOWN))], (128, 128), 2.0))
-    assert main(["curves", str(src), "--out", str(tmp_path / "o"), "--method", "network"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "not shipped" in err and "\n" not in err
+    for bad in (["--method", "nope"], ["--mode", "X"]):
+        with pytest.raises(SystemExit) as info:
+            main(["curves", str(src), "--out", str(tmp_path / "o"), *bad])
+        assert info.value.code == 2
+        assert bad[0] in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_curves_decompression_bomb_is_refused(tmp_path, capsys, monkeypatch):

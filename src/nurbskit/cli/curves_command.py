@@ -16,6 +16,7 @@ Examples::
 
     nurbskit curves digit.png --out out/digit
     nurbskit curves sketch.jpg --out out/sketch --tolerance 2 --refine
+    nurbskit curves splines.png --out out/net --method network --mode MV --refine
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OptionError
 from ._options import int_in, number_in
 
 
@@ -41,12 +41,17 @@ def register(subparsers) -> None:
     )
     p.add_argument("image", metavar="IMAGE", help="image file (PNG, JPEG, BMP, TIFF, ...)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--method", choices=("classic", "network"), default="classic",
-                   help="classic: skeleton, strokes, least squares (default); network: not shipped yet")
+    p.add_argument("--method", choices=("classic", "network", "auto"), default="classic",
+                   help="classic: skeleton, strokes, least squares (default); network: the shipped DeepSpline "
+                        "network of --mode; auto: both (the network refined), the one closer to the ink kept")
+    p.add_argument("--mode", choices=("V", "M", "MV"), default="MV",
+                   help="network of --method network: V one curve of 4-6 control points, M 1-3 curves of 5, "
+                        "MV 1-3 curves of 4-6 (default)")
     p.add_argument("--tolerance", type=number_in(0, 1000, low_open=True), default=1.0, metavar="PX",
                    help="largest distance in pixels from a stroke's skeleton to its curve (default 1)")
     p.add_argument("--refine", action="store_true",
-                   help="refine the control points by Chamfer against the ink pixels (L-BFGS)")
+                   help="refine the control points by Chamfer against the ink pixels (L-BFGS); with --method "
+                        "network the network's curves are the start")
     p.add_argument("--refine-iters", type=int_in(1, 1000), default=20, metavar="N",
                    help="L-BFGS iterations of --refine (default 20)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -130,16 +135,14 @@ def write_overlay(path: Path, grey: np.ndarray, curves: list) -> None:
 
 def run_curves(args) -> int:
     from .._fs import atomic_open, check_output_dir, output_directory
-    from ..curves.api import COORDINATES, read_image
-    from ..curves.classic import chamfer_to_ink, fit_image
+    from ..curves.api import COORDINATES, extract, read_image
+    from ..curves.classic import chamfer_to_ink
 
-    if args.method == "network":
-        raise OptionError("--method network: the trained curve models are not shipped yet; use --method classic")
     check_output_dir(args.out, args.overwrite, inputs=[args.image])
     start = time.perf_counter()
     grey = read_image(args.image)
-    curves, strokes = fit_image(grey, tolerance=args.tolerance, refine_iterations=args.refine_iters if args.refine else 0,
-                                source=str(args.image))
+    curves, strokes = extract(grey, method=args.method, mode=args.mode, tolerance=args.tolerance,
+                              refine=args.refine, refine_iterations=args.refine_iters, source=str(args.image))
     seconds = time.perf_counter() - start
     # No curve (a dot, a filled blob: no stroke longer than its width): no distances (null).
     chamfer = chamfer_to_ink(curves, strokes.ink) if curves else {k: None for k in
@@ -149,6 +152,8 @@ def run_curves(args) -> int:
         "image": str(args.image),
         "size": [w, h],
         "method": args.method,
+        "chosen": strokes.chosen,
+        "mode": args.mode if args.method == "network" else ("MV" if args.method == "auto" else None),
         "tolerance": args.tolerance,
         "refined": bool(args.refine),
         "polarity": "light on dark" if strokes.inverted else "dark on light",
@@ -168,8 +173,10 @@ def run_curves(args) -> int:
         with atomic_open(tmp / "report.json", "w") as fh:
             json.dump(report, fh, indent=2)
     if not curves:
-        print(f"0 curves from {args.image} ({w} x {h}, {report['polarity']}): no stroke longer than its width "
-              f"({strokes.width:.1f} px) in the ink; wrote {Path(args.out)}", file=sys.stdout)
+        why = (f"no stroke longer than its width ({strokes.width:.1f} px) in the ink" if strokes.width is not None
+               else "the network found none")
+        print(f"0 curves from {args.image} ({w} x {h}, {report['polarity']}): {why}; wrote {Path(args.out)}",
+              file=sys.stdout)
         return 0
     print(f"{len(curves)} curve(s) from {args.image} ({w} x {h}, {report['polarity']}): Chamfer curves->ink "
           f"{chamfer['curves_to_ink']:.2f} px, ink->curves {chamfer['ink_to_curves']:.2f} px in {seconds:.2f} s; "

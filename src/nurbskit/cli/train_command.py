@@ -26,6 +26,7 @@ from ._options import int_in, number_in
 
 # Modules that add a ``nurbskit train <model>`` sub-command (``register_train(subparsers)``).
 TRAINERS: tuple[str, ...] = (
+    "nurbskit.curves.nets.train",
     "nurbskit.shapes.nets.training",
 )
 

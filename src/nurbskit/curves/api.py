@@ -14,7 +14,8 @@ import numpy as np
 
 from ..errors import InputError, OptionError
 
-METHODS = ("classic", "network")
+METHODS = ("classic", "network", "auto")
+MODES = ("V", "M", "MV")
 COORDINATES = ("pixels: x to the right, y down, origin at the top-left corner of the top-left pixel; "
                "the centre of pixel [row, col] is (col + 0.5, row + 0.5)")
 
@@ -56,17 +57,88 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     return to_grey(array, str(path))
 
 
+def extract(grey: np.ndarray, method: str = "classic", mode: str = "MV", tolerance: float = 1.0,
+            refine: bool = False, refine_iterations: int = 20, source: str = "image"):
+    """Curves in a grey image ``(H, W)`` and what was found on the way -> ``(curves, Extraction)``.
+
+    The one place that dispatches on ``method`` (:func:`curves_from_image` and
+    ``nurbskit curves`` both call it):
+
+    * ``"classic"``: :func:`nurbskit.curves.classic.fit_image` (skeleton, strokes, least
+      squares), refined by Chamfer against the ink when ``refine``.
+    * ``"network"``: the shipped ``mode`` network (:mod:`nurbskit.curves.nets.predict`);
+      with ``refine`` its curves start the classical Chamfer refinement
+      (:func:`nurbskit.curves.classic.refine`), the paper's "network-initialised
+      optimisation".
+    * ``"auto"``: both candidates, the classical curves (refined when ``refine``) and the
+      MV network's curves refined by Chamfer (always: unrefined network curves are
+      rarely better), and keeps the one with the smaller symmetric Chamfer distance to the
+      ink pixels, the measure ``report.json`` gives; a tie goes to the classical curves.
+      Why: the classical path wins on drawings unlike the training set (any stroke
+      count, open and closed strokes), the refined network where strokes cross and the
+      skeleton's junction pairing guesses wrong (see ``benchmarks/results/curves_nets.md``).
+    """
+    from .classic import Strokes, chamfer_to_ink, fit_image, ink_mask
+    from .classic import refine as refine_curves
+
+    if method not in METHODS:
+        raise OptionError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if mode not in MODES:
+        raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    if not tolerance > 0:
+        raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
+    iterations = refine_iterations if refine else 0
+    if method == "classic":
+        curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+        return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+    from .nets.predict import network_curves
+
+    ink, inverted = ink_mask(grey, source)
+    if method == "network":
+        curves = network_curves(grey, mode, inverted)
+        if iterations:
+            curves = refine_curves(curves, ink, iterations)
+        return curves, Extraction(ink, inverted, None, "network", None)
+    classic, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+    net = refine_curves(network_curves(grey, "MV", inverted), ink, refine_iterations)
+    score = [chamfer_to_ink(c, ink)["symmetric"] if c else float("inf") for c in (classic, net)]
+    if score[1] < score[0]:
+        return net, Extraction(ink, inverted, strokes.width, "network", strokes)
+    return classic, Extraction(ink, inverted, strokes.width, "classic", strokes)
+
+
+class Extraction:
+    """What :func:`extract` found besides the curves.
+
+    Attributes:
+        ink: ``(H, W)`` bool ink mask (Otsu).
+        inverted: True for light ink on a dark background.
+        width: stroke width in pixels estimated by the classical path (None when it did not run).
+        chosen: the method whose curves were returned (``"classic"`` or ``"network"``).
+        strokes: the classical path's :class:`~nurbskit.curves.classic.Strokes`, or None.
+    """
+
+    def __init__(self, ink, inverted, width, chosen, strokes):
+        self.ink, self.inverted, self.width, self.chosen, self.strokes = ink, inverted, width, chosen, strokes
+
+
 def curves_from_image(image, method: str = "classic", tolerance: float = 1.0, refine: bool = False,
-                      refine_iterations: int = 20) -> list:
+                      refine_iterations: int = 20, mode: str = "MV") -> list:
     """B-spline curves drawn in ``image``, in pixel coordinates (see the module's convention).
 
     Args:
         image: a path to an image file, or an ``(H, W)`` grey / ``(H, W, 3|4)`` colour array.
             Dark on light and light on dark are both detected.
         method: ``"classic"`` (skeleton, strokes, least squares; see
-            :mod:`nurbskit.curves.classic`). ``"network"`` is not shipped yet.
-        tolerance: largest distance in pixels from a stroke's skeleton to its curve.
-        refine: refine the control points by Chamfer against the ink pixels (L-BFGS).
+            :mod:`nurbskit.curves.classic`), ``"network"`` (the shipped DeepSpline network
+            of ``mode``; weights load once, on first use) or ``"auto"`` (both, the one
+            closer to the ink kept; see :func:`extract`).
+        tolerance: largest distance in pixels from a stroke's skeleton to its curve (classic).
+        refine: refine the control points by Chamfer against the ink pixels (L-BFGS); with
+            ``method="network"`` the network's curves are the start.
+        refine_iterations: L-BFGS iterations of the refinement.
+        mode: the network: ``"V"`` one curve of 4-6 control points, ``"M"`` 1-3 curves of
+            5, ``"MV"`` 1-3 curves of 4-6 (the default).
 
     Returns:
         A list of :class:`~nurbskit.NURBSCurve` (float64, 2D), one per stroke.
@@ -78,16 +150,12 @@ def curves_from_image(image, method: str = "classic", tolerance: float = 1.0, re
         >>> c.control_points[:, 1].sub(20.5).abs().max().item() < 1, c.control_points[0, 0].item() < 10
         (True, True)
     """
-    from .classic import fit_image
+    from .classic import to_grey
 
-    if method not in METHODS:
-        raise OptionError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    if method == "network":
-        raise OptionError("method 'network': the trained curve models are not shipped yet; use method='classic'")
     source = "image"
     if isinstance(image, (str, os.PathLike)):
         source = str(image)
         image = read_image(image)
-    curves, _ = fit_image(image, tolerance=tolerance, refine_iterations=refine_iterations if refine else 0,
-                          source=source)
+    curves, _ = extract(to_grey(image, source), method=method, mode=mode, tolerance=tolerance, refine=refine,
+                        refine_iterations=refine_iterations, source=source)
     return curves

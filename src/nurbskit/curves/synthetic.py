@@ -155,3 +155,146 @@ def make_sample(seed: int, config: SyntheticConfig = SyntheticConfig()) -> Sampl
 def make_batch(seeds, config: SyntheticConfig = SyntheticConfig()) -> list[Sample]:
     """:func:`make_sample` for each seed."""
     return [make_sample(int(s), config) for s in seeds]
+
+
+# --------------------------------------------------------------------------------------
+# Batches for training (issue 10): the same recipe, drawn from a torch.Generator and
+# rendered for a whole batch at once.
+
+# The three problems of the paper (section 6): V one curve of 4 to 6 control points; M 1 to
+# 3 curves of 5; MV 1 to 3 curves of 4 to 6.
+MODES = {"V": {"curves": (1, 1), "ctrl": (4, 6)},
+         "M": {"curves": (1, 3), "ctrl": (5, 5)},
+         "MV": {"curves": (1, 3), "ctrl": (4, 6)}}
+
+
+def mode_config(mode: str, size: int = 128, width: float | None = None) -> SyntheticConfig:
+    """The :class:`SyntheticConfig` of a DeepSpline problem (``"V"``, ``"M"``, ``"MV"``) at ``size`` pixels.
+
+    The stroke width and margin scale with the size (2 px and 4 px at 128, the recipe's).
+    """
+    if mode not in MODES:
+        raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    width = 2.0 * size / 128 if width is None else width
+    return SyntheticConfig(size=(size, size), width=width, margin=4.0 * size / 128, **MODES[mode])
+
+
+@dataclasses.dataclass
+class Batch:
+    """A batch of drawings with padded targets.
+
+    Attributes:
+        image: ``(B, H, W)`` float32 in [0, 1], dark strokes on white.
+        points: ``(B, K, P, 2)`` float64 control points in pixels (x, y), zero where padded;
+            ``K``, ``P`` the config's largest numbers of curves and control points.
+        counts: ``(B, K)`` int64 control points of each curve, 0 for absent curves.
+        n_curves: ``(B,)`` int64.
+    """
+
+    image: "torch.Tensor"  # noqa: F821 - torch is imported lazily
+    points: "torch.Tensor"  # noqa: F821
+    counts: "torch.Tensor"  # noqa: F821
+    n_curves: "torch.Tensor"  # noqa: F821
+
+    def samples(self) -> list[Sample]:
+        """The batch as :class:`Sample` objects (numpy, float64 images)."""
+        out = []
+        for b in range(self.image.shape[0]):
+            cps = [self.points[b, k, : int(self.counts[b, k])].numpy().astype(np.float64)
+                   for k in range(int(self.n_curves[b]))]
+            out.append(Sample(image=self.image[b].double().numpy(), control_points=cps,
+                              counts=np.array([len(p) for p in cps])))
+        return out
+
+
+def make_torch_batch(generator, batch_size: int, config: SyntheticConfig = SyntheticConfig(),
+                     spacing: float = 0.25) -> Batch:
+    """``batch_size`` drawings of the recipe of ``config``, drawn from a ``torch.Generator``.
+
+    The same generator state gives the same batch (the training loop's convention:
+    :func:`nurbskit.learn.batch_generator`). Rendering is :func:`render`'s distance-field
+    stroke, evaluated by scattering each curve sample's ink into the pixels within its
+    reach (``scatter_reduce`` with ``amax``: the largest ink over samples is the ink of
+    the nearest sample), with every curve sampled at most ``spacing`` px apart (its
+    control polygon bounds its length).
+    """
+    import torch
+
+    h, w = config.size
+    k_max, p_max = config.curves[1], config.ctrl[1]
+    f64 = torch.float64
+    n_curves = torch.randint(config.curves[0], config.curves[1] + 1, (batch_size,), generator=generator)
+    counts = torch.randint(config.ctrl[0], config.ctrl[1] + 1, (batch_size, k_max), generator=generator)
+    u = torch.rand((batch_size, k_max, p_max, 2), generator=generator, dtype=f64)
+    lo = torch.tensor([config.margin, config.margin], dtype=f64)
+    hi = torch.tensor([w - config.margin, h - config.margin], dtype=f64)
+    points = lo + u * (hi - lo)
+    present = torch.arange(k_max) < n_curves[:, None]
+    counts = torch.where(present, counts, torch.zeros_like(counts))
+    j = torch.arange(p_max)
+    valid = j < counts[..., None]  # (B, K, P)
+    last = points.gather(2, (counts.clamp(min=1) - 1)[..., None, None].expand(-1, -1, 1, 2))[:, :, 0]
+    reverse = points[:, :, 0, 0] > last[..., 0]  # canonical orientation: first point left of the last
+    index = torch.where(reverse[..., None] & valid, counts[..., None] - 1 - j, j)
+    points = points.gather(2, index[..., None].expand(-1, -1, -1, 2))
+    points = torch.where(valid[..., None], points, torch.zeros_like(points))
+    pts, owner = curve_samples(points, counts, config.degree, spacing)
+    ink = render_batch(pts, owner // k_max, batch_size, config.size, config.width)
+    return Batch(image=(1.0 - ink).float(), points=points, counts=counts, n_curves=n_curves)
+
+
+def curve_samples(points, counts, degree: int = 3, spacing: float = 0.25):
+    """Samples of padded curves, each at most about ``spacing`` px apart -> ``(pts (N, 2), owner (N,))``.
+
+    ``points (B, K, P, 2)``, ``counts (B, K)`` (0: no curve); ``owner`` is the flat curve
+    index ``b * K + k`` of each sample. A curve gets ``ceil(polygon / spacing) + 1``
+    uniform parameters (its control polygon bounds its length), so no curve pays for the
+    longest one.
+    """
+    import torch
+
+    from ..core.basis import basis_matrix
+    from ..core.knots import clamped_uniform
+
+    k_max, p_max = points.shape[1], points.shape[2]
+    flat_pts = points.reshape(-1, p_max, 2).double()
+    flat_counts = counts.reshape(-1)
+    valid = torch.arange(p_max) < flat_counts[:, None]
+    polygon = ((flat_pts[:, 1:] - flat_pts[:, :-1]).norm(dim=-1) * valid[:, 1:]).sum(-1)
+    out, owner = [], []
+    for n in sorted({int(c) for c in flat_counts.tolist() if c > 0}):
+        curves = (flat_counts == n).nonzero()[:, 0]
+        m = (torch.ceil(polygon[curves] / spacing).long() + 1).clamp(min=16)
+        who = torch.repeat_interleave(curves, m)
+        start = torch.repeat_interleave(torch.cumsum(m, 0) - m, m)
+        u = (torch.arange(int(m.sum())) - start).double() / torch.repeat_interleave(m - 1, m).double()
+        basis = basis_matrix(clamped_uniform(n, degree, dtype=torch.float64), degree, n, u)  # (N, n)
+        out.append(torch.einsum("sn,snd->sd", basis, flat_pts[who, :n]))
+        owner.append(who)
+    if not out:
+        return torch.zeros(0, 2, dtype=torch.float64), torch.zeros(0, dtype=torch.long)
+    return torch.cat(out), torch.cat(owner)
+
+
+def render_batch(pts, image_index, batch_size: int, size: tuple[int, int], width: float):
+    """:func:`render` for many images at once: ``pts (N, 2)`` dense samples, ``image_index (N,)`` -> ``(B, H, W)`` ink.
+
+    Each sample scatters ``clip(width / 2 + 1/2 - d, 0, 1)`` into the pixels within its
+    reach and each pixel keeps the largest (``scatter_reduce(amax)``), which is the ink of
+    its nearest sample: the same image as :func:`render`, without a k-d tree per image.
+    """
+    import torch
+
+    h, w = size
+    canvas = torch.zeros(batch_size * h * w, dtype=torch.float64)
+    if len(pts):
+        r = int(np.ceil(width / 2 + 1.0))
+        off = torch.arange(-r, r + 1)
+        cols = (torch.floor(pts[:, 0]).long()[:, None, None] + off[None, None, :]).expand(-1, 2 * r + 1, -1)
+        rows = (torch.floor(pts[:, 1]).long()[:, None, None] + off[None, :, None]).expand(-1, -1, 2 * r + 1)
+        d = torch.hypot(cols + 0.5 - pts[:, 0, None, None], rows + 0.5 - pts[:, 1, None, None])
+        ink = (width / 2 + 0.5 - d).clamp(0, 1)
+        keep = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h) & (ink > 0)
+        flat = (image_index[:, None, None] * h + rows) * w + cols
+        canvas.scatter_reduce_(0, flat[keep], ink[keep], reduce="amax")
+    return canvas.reshape(batch_size, h, w)

@@ -1,0 +1,246 @@
+"""The shipped DeepSpline curve networks (issue 10): the paper's tables 1 and 2, speed, MNIST.
+
+Method:
+
+- Held-out synthetic set: per mode (V, M, MV), ``--count`` drawings of the paper's recipe
+  at 128 x 128 (``nurbskit.curves.synthetic.make_torch_batch`` with ``mode_config(mode,
+  128)``), drawn in chunks of 100 from ``nurbskit.learn.batch_generator(777, chunk)``:
+  seeds no training run uses (training draws ``batch_generator(1, step)``). The networks
+  see the images area-averaged to their input size (64), as in training.
+- Table 2 (the paper's measures): control-point MSE in the unit square (the training
+  loss's term: mean over the true points' coordinates, predicted curves matched to the true
+  ones by the Hungarian algorithm for M and MV, each curve decoded for its true number of
+  points), point-count accuracy (V: per image; MV: per true curve, matched), curve-count
+  accuracy (the first STOP > 1/2), and the symmetric Chamfer distance in pixels between
+  the predicted curves (free-running: counts from the stop probabilities) and the true
+  curves (mean nearest distance between dense samples both ways, then the mean of the
+  two), at 128 px. The paper's numbers stand beside ours.
+- Table 1: on the first ``--refine`` images per mode, the Chamfer to the true curves of
+  the network alone, of the network's curves refined by Chamfer against the ink pixels
+  (``nurbskit.curves.classic.refine``, 20 L-BFGS iterations), of a random start refined
+  the same way (the true number of curves, each with n = 4, 5 and 6 control points
+  uniform in the image, the best of the three kept by Chamfer to the ink: the paper's
+  protocol), and of the classical path (``fit_image``) on the same images.
+- Speed: median milliseconds of ``network_curves`` (one 128 x 128 image: resize, forward,
+  curves in pixels) over 30 runs after warm-up, one torch thread, wall-clock and CPU
+  (``time.process_time``: what the process itself used, less sensitive to the other
+  processes on this shared, loaded machine; the load average is recorded beside it).
+- MNIST: the first ``--mnist`` test digits of ``../shared/data/mnist`` (IDX read by
+  ``bench_curves.read_idx_images``), upsampled 4x; per method (each network alone and
+  refined, classical) the Chamfer from the curves to the ink and from the ink to the
+  curves; one overlay figure per mode in ``results/curves_nets_figures/``.
+
+Run: ``PYTHONPATH=src python benchmarks/bench_curves_nets.py [--count 2000] [--refine 20] [--mnist 30]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import RESULTS, write_results  # noqa: E402
+from bench_curves import MNIST, figure, read_idx_images, upsample  # noqa: E402
+
+from nurbskit.curves.classic import chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine  # noqa: E402
+from nurbskit.curves.nets.predict import load_model, network_curves, predict_unit, to_curves  # noqa: E402
+from nurbskit.curves.nets.train import LOSSES, network_inputs  # noqa: E402
+from nurbskit.curves.synthetic import curve_of, dense_samples, make_torch_batch, mode_config  # noqa: E402
+from nurbskit.learn import batch_generator  # noqa: E402
+
+PAPER = {"V": {"cp_mse": 0.0130, "point_acc": 0.946}, "M": {"cp_mse": 0.0270, "curve_acc": 0.9985},
+         "MV": {"cp_mse": 0.0374, "point_acc": 0.828, "curve_acc": 0.995}}
+GOAL_MSE = {m: 1.5 * PAPER[m]["cp_mse"] for m in PAPER}
+HELD_OUT_SEED = 777
+SIZE = 128
+REFINE_ITERS = 20
+
+
+def _samples(curves) -> np.ndarray:
+    return np.concatenate([dense_samples(c, 0.5) for c in curves]) if curves else np.zeros((0, 2))
+
+
+def _chamfer(curves, truth) -> float:
+    return chamfer_points(_samples(curves), _samples(truth))["symmetric"]
+
+
+def table2(mode: str, count: int, chunk: int = 100):
+    model, meta = load_model(mode)
+    config = mode_config(mode, SIZE)
+    sums = {}
+    chamfers, images = [], []
+    done = 0
+    while done < count:
+        n = min(chunk, count - done)
+        batch = make_torch_batch(batch_generator(HELD_OUT_SEED, done // chunk), n, config)
+        ink, unit = network_inputs(batch, meta["size"])
+        with torch.no_grad():
+            _, parts = LOSSES[mode](model, (ink, unit, batch.counts, batch.n_curves))
+        for k, v in parts.items():
+            sums[k] = sums.get(k, 0.0) + float(v) * n
+        predicted = predict_unit(model, ink)
+        for b, s in enumerate(batch.samples()):
+            curves = to_curves(predicted[b], SIZE, SIZE)
+            chamfers.append(_chamfer(curves, s.curves()))
+            if len(images) < 200:
+                images.append((s, curves))
+        done += n
+    row = {"mode": mode, "method": "network", "images": count, "cp_mse": sums["mse"] / count,
+           "paper_cp_mse": PAPER[mode]["cp_mse"], "goal_cp_mse": GOAL_MSE[mode],
+           "chamfer_px": statistics.fmean(chamfers), "chamfer_px_median": statistics.median(chamfers)}
+    for key in ("point_acc", "curve_acc"):
+        if key in sums:
+            row[key] = sums[key] / count
+            row[f"paper_{key}"] = PAPER[mode].get(key)
+    row["steps"] = meta.get("steps")
+    return row, images
+
+
+def table1(mode: str, images: list, count: int, rng: np.random.Generator):
+    rows = []
+    for s, net in images[:count]:
+        truth = s.curves()
+        ink, _ = ink_mask(s.image)
+        t = time.perf_counter()
+        refined = refine(net, ink, REFINE_ITERS) if net else net
+        t_ref = time.perf_counter() - t
+        best, best_score = None, float("inf")
+        for n in (4, 5, 6):
+            start = [curve_of(np.stack([rng.uniform(0, SIZE, n), rng.uniform(0, SIZE, n)], 1))
+                     for _ in range(s.n_curves)]
+            r = refine(start, ink, REFINE_ITERS)
+            score = chamfer_to_ink(r, ink)["symmetric"]
+            if score < best_score:
+                best, best_score = r, score
+        classic, _ = fit_image(s.image)
+        rows.append({"network": _chamfer(net, truth), "network_refined": _chamfer(refined, truth),
+                     "random_refined": _chamfer(best, truth), "classic": _chamfer(classic, truth),
+                     "refine_seconds": t_ref})
+    out = {"mode": mode, "images": len(rows)}
+    for key in ("network", "network_refined", "random_refined", "classic"):
+        vals = [r[key] for r in rows]
+        out[f"{key}_mean"] = statistics.fmean(vals)
+        out[f"{key}_median"] = statistics.median(vals)
+    out["ratio_net_refined_to_random"] = out["network_refined_mean"] / out["random_refined_mean"]
+    out["refine_seconds_median"] = statistics.median(r["refine_seconds"] for r in rows)
+    return out
+
+
+def speed(mode: str) -> tuple[float, float]:
+    """Median wall-clock and CPU (process) milliseconds of one image through ``network_curves``."""
+    s = make_torch_batch(batch_generator(HELD_OUT_SEED + 1, 0), 1, mode_config(mode, SIZE)).samples()[0]
+    for _ in range(3):
+        network_curves(s.image, mode)
+    wall, cpu = [], []
+    for _ in range(30):
+        t, c = time.perf_counter(), time.process_time()
+        network_curves(s.image, mode)
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return 1000 * statistics.median(wall), 1000 * statistics.median(cpu)
+
+
+def mnist(digits: np.ndarray, modes: list[str]):
+    rows, examples = [], {m: [] for m in modes}
+    for i, d in enumerate(digits):
+        image = upsample(d, 4)
+        ink, inverted = ink_mask(image)
+        methods = {}
+        classic, _ = fit_image(image)
+        methods["classic"] = classic
+        for m in modes:
+            net = network_curves(image, m, inverted)
+            methods[f"network {m}"] = net
+            methods[f"network {m} refined"] = refine(net, ink, REFINE_ITERS) if net else net
+            if i < 8:
+                examples[m].append((f"#{i} {m}: {len(net)} curve(s)", image, net))
+                examples[m].append((f"#{i} {m} refined", image, methods[f"network {m} refined"]))
+        for name, curves in methods.items():
+            ch = chamfer_to_ink(curves, ink) if curves else {"curves_to_ink": float("nan"),
+                                                              "ink_to_curves": float("nan")}
+            rows.append({"digit": i, "method": name, "curves_to_ink": ch["curves_to_ink"],
+                         "ink_to_curves": ch["ink_to_curves"], "curves": len(curves)})
+    summary = []
+    for name in dict.fromkeys(r["method"] for r in rows):
+        rs = [r for r in rows if r["method"] == name]
+        summary.append({"method": name, "digits": len(rs),
+                        "curves_to_ink_mean": float(np.nanmean([r["curves_to_ink"] for r in rs])),
+                        "ink_to_curves_mean": float(np.nanmean([r["ink_to_curves"] for r in rs])),
+                        "curves_mean": statistics.fmean(r["curves"] for r in rs)})
+    return summary, examples
+
+
+def _mode_of(row: dict) -> str | None:
+    if row.get("table") == "mnist":
+        parts = row["method"].split()
+        return parts[1] if len(parts) > 1 else None
+    return row.get("mode")
+
+
+def _merged(rows: list[dict], modes: list[str]) -> list[dict]:
+    """This run's rows plus the committed results' rows of the modes not run now (``--modes`` runs a subset)."""
+    import json
+
+    path = RESULTS / "curves_nets.json"
+    if not path.exists():
+        return rows
+    old = [r for r in json.loads(path.read_text())["rows"] if _mode_of(r) is not None and _mode_of(r) not in modes]
+    order = {"2": 0, "1": 1, "mnist": 2}
+    return sorted(rows + old, key=lambda r: (order[r["table"]], _mode_of(r) or "", r.get("method", "")))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=2000, help="held-out images per mode (table 2)")
+    parser.add_argument("--refine", type=int, default=20, help="images per mode for table 1 (refinements)")
+    parser.add_argument("--mnist", type=int, default=30, help="MNIST test digits")
+    parser.add_argument("--modes", default="V,M,MV")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    modes = args.modes.split(",")
+    load = os.getloadavg()[0]
+    t2, t1, rows = [], [], []
+    rng = np.random.default_rng(HELD_OUT_SEED)
+    for mode in modes:
+        row, images = table2(mode, args.count)
+        row["inference_ms"], row["inference_cpu_ms"] = speed(mode)
+        row["load_average"] = os.getloadavg()[0]
+        t2.append(row)
+        t1.append(table1(mode, images, args.refine, rng))
+        print(row, t1[-1], flush=True)
+    digits_summary, examples = ([], {})
+    if MNIST.exists() and args.mnist:
+        digits_summary, examples = mnist(read_idx_images(MNIST, args.mnist), modes)
+        for m, ex in examples.items():
+            figure(ex, RESULTS / "curves_nets_figures" / f"mnist_{m.lower()}.png")
+    rows = ([dict(r, table="2") for r in t2] + [dict(r, table="1", method="refinement") for r in t1]
+            + [dict(r, table="mnist") for r in digits_summary])
+    rows = _merged(rows, modes)
+    notes = ("Table 2: held-out synthetic drawings, 128 px, seed 777; the paper's numbers in the paper_ columns, "
+             "goal: MSE <= 1.5 x the paper's, MV point accuracy >= 0.90 and curve accuracy >= 0.995. "
+             "Table 1: Chamfer in pixels to the true curves; goal: network-initialised refinement <= 0.5 x the "
+             "random start. MNIST: Chamfer in pixels to the ink of the 4x upsampled digits. "
+             f"Load average at the start: {load:.1f} on {os.cpu_count()} cores (shared machine).")
+    columns = [("table", "table"), ("mode", "mode"), ("method", "method"), ("images", "images"),
+               ("cp_mse", "CP MSE"), ("paper_cp_mse", "paper"), ("point_acc", "point acc"),
+               ("paper_point_acc", "paper"), ("curve_acc", "curve acc"), ("paper_curve_acc", "paper"),
+               ("chamfer_px", "Chamfer px"), ("inference_ms", "ms/image"), ("inference_cpu_ms", "CPU ms/image"),
+               ("network_mean", "net"), ("network_refined_mean", "net+refine"),
+               ("random_refined_mean", "random+refine"), ("classic_mean", "classic"),
+               ("ratio_net_refined_to_random", "net+refine / random"),
+               ("digits", "digits"), ("curves_to_ink_mean", "curves->ink"), ("ink_to_curves_mean", "ink->curves")]
+    write_results("curves_nets", rows, columns, meta={"count": args.count, "refine": args.refine,
+                                                      "mnist": args.mnist, "held_out_seed": HELD_OUT_SEED,
+                                                      "load_average": load, "size": SIZE},
+                  title="DeepSpline curve networks: tables 1 and 2, speed, MNIST", notes=notes)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,95 @@
+"""The shipped curve networks at work: image in, B-spline curves in pixel coordinates out.
+
+Convention: the input image (any size, dark on light or light on dark: detected as the
+classical path does, :func:`nurbskit.curves.classic.ink_mask`) is turned into ink in
+[0, 1] (0 the background's median grey, 1 the darkest ink), resized to the network's
+``S x S`` by area averaging when larger (as the training images are,
+:func:`~.train.network_inputs`) and bilinearly when smaller, and the
+predicted control points ``(u, v)`` in the unit square map back to pixels as
+``(u * W, v * H)`` (x to the right, y down, the origin at the top-left corner of the
+top-left pixel: the api's convention). Counts follow the stop probabilities: a curve or
+point sequence ends at the first step whose STOP probability exceeds 1/2 (at most
+:data:`~.models.MAX_CURVES` curves and :data:`~.models.MAX_POINTS` points; a curve keeps
+at least 4 control points, the fewest a cubic has).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import torch
+
+from ...errors import OptionError
+from .models import MAX_CURVES, MAX_POINTS, MIN_POINTS, build
+from .train import predicted_count
+
+MODES = ("V", "M", "MV")
+
+
+@functools.lru_cache(maxsize=None)
+def load_model(mode: str):
+    """The shipped network of ``mode`` (``nurbskit/learn/weights/curves_<mode>.pt``), loaded once, in eval mode.
+
+    Returns ``(model, meta)``; raises InputError when the weights are not shipped.
+    """
+    from ...learn import load_weights
+
+    if mode not in MODES:
+        raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    state, meta = load_weights(f"curves_{mode.lower()}")
+    model = build(mode, meta.get("arch"))
+    model.load_state_dict(state)
+    model.eval()
+    return model, meta
+
+
+def network_ink(grey: np.ndarray, size: int, inverted: bool = False) -> torch.Tensor:
+    """``(H, W)`` grey in [0, 1] -> ink ``(1, 1, size, size)`` float32 (see the module's convention)."""
+    from torch.nn import functional as F
+
+    ink = grey if inverted else 1.0 - grey
+    ink = np.asarray(ink, dtype=np.float64)
+    lo, hi = float(np.median(ink)), float(ink.max())
+    ink = torch.as_tensor(np.clip((ink - lo) / max(hi - lo, 1e-6), 0.0, 1.0), dtype=torch.float32)[None, None]
+    if ink.shape[-2:] != (size, size):
+        shrink = min(ink.shape[-2:]) >= size
+        ink = F.interpolate(ink, size=(size, size), mode="area" if shrink else "bilinear",
+                            align_corners=None if shrink else False)
+    return ink.clamp(0.0, 1.0)
+
+
+@torch.no_grad()
+def predict_unit(model, ink: torch.Tensor) -> list[list[np.ndarray]]:
+    """Control points in the unit square: ink ``(B, 1, S, S)`` -> per image, one ``(n_i, 2)`` array per curve."""
+    mode = model.mode
+    if mode == "V":
+        pts, stops = model(ink, MAX_POINTS)
+        n = predicted_count(stops, MIN_POINTS)
+        return [[pts[b, : int(n[b])].double().numpy()] for b in range(len(n))]
+    if mode == "M":
+        pts, stops = model(ink, MAX_CURVES)
+        k = predicted_count(stops)
+        return [[pts[b, i].double().numpy() for i in range(int(k[b]))] for b in range(len(k))]
+    tokens, codes, curve_stops = model.curve_codes(ink, MAX_CURVES)
+    k = predicted_count(curve_stops)
+    pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
+    n = predicted_count(point_stops, MIN_POINTS)
+    return [[pts[b, i, : int(n[b, i])].double().numpy() for i in range(int(k[b]))] for b in range(len(k))]
+
+
+def to_curves(unit: list[np.ndarray], width: int, height: int) -> list:
+    """Unit-square control points -> :class:`~nurbskit.NURBSCurve` (float64, cubic, clamped uniform) in pixels."""
+    from ..synthetic import curve_of
+
+    scale = np.array([width, height], dtype=np.float64)
+    return [curve_of(p * scale) for p in unit]
+
+
+def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -> list:
+    """The curves the shipped ``mode`` network reads in ``grey (H, W)``, in pixel coordinates."""
+    model, meta = load_model(mode)
+    size = int(meta.get("size", 64))
+    unit = predict_unit(model, network_ink(grey, size, inverted))[0]
+    h, w = grey.shape
+    return to_curves(unit, w, h)
