@@ -422,6 +422,42 @@ def test_curves_and_patches_run_through_the_registry(client, tmp_path):
     assert set(nurbskit.batch.COMMANDS) >= {"fit", "volume", "patches", "shape", "curves"}
 
 
+def test_export_json_surfaces_to_step_read_back_by_opencascade(client, tmp_path):
+    import torch
+
+    from _extras import require_extra
+
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad import read_cad
+
+    folder = tmp_path / "surfaces"
+    folder.mkdir()
+    surfaces = {}
+    for i, sizes in enumerate([(4, 4), (5, 4), (4, 6)]):
+        g = torch.Generator().manual_seed(i)
+        surfaces[f"s{i}"] = nurbskit.NURBSSurface(torch.rand(*sizes, 3, dtype=torch.float64, generator=g), (3, 3))
+        nurbskit.core.save(surfaces[f"s{i}"], folder / f"s{i}.json")
+    (folder / "garbage.json").write_text("{not json")
+    (folder / "report.json").write_text("{}")  # a result's side file: no input of a folder search
+    out = tmp_path / "steps"
+    records = _by_name(nurbskit.batch.run("export", [folder], out, client=client, options=["--format", "step"]))
+    assert sorted(records) == ["garbage", "s0", "s1", "s2"]
+    assert records["garbage"]["status"] == "failed" and "garbage.json" in records["garbage"]["error"]
+    assert "\n" not in records["garbage"]["error"] and not (out / "garbage").exists()
+    for name, surface in surfaces.items():
+        assert records[name]["status"] == "ok", records[name]
+        files = {p.name for p in (out / name).iterdir()}
+        assert files == {f"{name}.step", "report.json", MARKER, ".nurbskit-manifest.json"}
+        assert (records[name]["metrics"]["valid"], records[name]["metrics"]["faces"]) == (1.0, 1.0)
+        model = read_cad(out / name / f"{name}.step")  # read back independently of the batch
+        assert len(model.faces) == 1
+        back = model.faces[0].surface
+        assert back.sizes == surface.sizes
+        assert_close(back.control_points, surface.control_points, atol=1e-12)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["aggregate"]["status"] == "3 ok, 1 failed" and summary["aggregate"]["valid"] == 1.0
+
+
 # --- no cluster needed -------------------------------------------------------------------------
 
 def test_import_does_not_load_dask():
