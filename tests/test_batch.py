@@ -422,6 +422,36 @@ def test_curves_and_patches_run_through_the_registry(client, tmp_path):
     assert set(nurbskit.batch.COMMANDS) >= {"fit", "volume", "patches", "shape", "curves"}
 
 
+def test_shape_through_the_cli_on_the_cluster_kind_per_input(client, tmp_path, capsys):
+    # `nurbskit batch shape ... -- --kind auto` (the issue's `fit --kind ...`): a vase of
+    # revolution and an extruded wave; the summary names the kind fitted to each.
+    g = np.random.default_rng(0)
+    folder = tmp_path / "clouds"
+    folder.mkdir()
+    t, z = g.random(400) * 2 * np.pi, g.random(400) * 2
+    r = 1 + 0.3 * np.sin(2 * z)
+    np.savetxt(folder / "vase.xyz", np.column_stack([r * np.cos(t), r * np.sin(t), z]))
+    x, h = g.random(400) * 3, g.random(400) * 2
+    np.savetxt(folder / "wave.xyz", np.column_stack([x, 0.5 * np.sin(2 * x), h]))
+    from nurbskit.cli import main
+
+    out = tmp_path / "shapes"
+    code = main(["batch", "shape", str(folder), "--out", str(out), "--scheduler", client.scheduler.address,
+                 "--quiet", "--", "--kind", "auto", "--iters", "5", "--no-figures"])
+    assert code == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    rows = _by_name(summary["rows"])
+    assert (rows["vase"]["kind"], rows["wave"]["kind"]) == ("revolution", "extrusion")
+    for name in ("vase", "wave"):
+        report = json.loads((out / name / "report.json").read_text())
+        assert report["kind"] == rows[name]["kind"]
+        assert rows[name]["to_surface_p95"] == report["metrics"]["to_surface_p95"] < 5e-3
+    assert summary["aggregate"]["kind"] in ("revolution: 1, extrusion: 1", "extrusion: 1, revolution: 1")
+    header, *lines = (out / "summary.csv").read_text().strip().splitlines()
+    assert header.split(",")[6] == "kind" and lines[-1].startswith("ALL,")
+    assert (out / "summary.png").stat().st_size > 1000
+
+
 def test_export_json_surfaces_to_step_read_back_by_opencascade(client, tmp_path):
     import torch
 
@@ -487,6 +517,8 @@ def test_options_are_checked_before_any_work(tmp_path, monkeypatch, clouds, caps
         nurbskit.batch.run("fit", [clouds], tmp_path / "o", options=["--out", "x"])
     assert main(["batch", "fit", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "missing: no such file or folder" in capsys.readouterr().err
+    assert main(["batch", "fit", str(clouds), "--out", str(tmp_path / "o"), "--", "--kind", "revolution"]) == 2
+    assert "nurbskit batch shape" in capsys.readouterr().err  # fit --kind: the exact shapes are `shape`
     assert main(["batch", "nope", str(clouds), "--out", str(tmp_path / "o")]) == 2
     assert "COMMAND: expected one of" in capsys.readouterr().err
     assert main(["batch", "fit", str(clouds), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
@@ -557,6 +589,9 @@ def test_summary_rows_and_aggregate():
     assert [r["m"] for r in rows][:2] == [1.0, 3.0] and np.isnan(rows[2]["m"]) and np.isnan(rows[1]["k"])
     total = aggregate(records)
     assert (total["status"], total["seconds"], total["m"], total["k"], total["resumed"]) == ("2 ok, 1 failed", 3.5, 2.0, 4.0, 1)
+    # A label metric (strings) is counted per value over the ok rows, most common first.
+    labelled = [{**r, "metrics": {**r["metrics"], "kind": kind}} for r, kind in zip(records * 2, "abacba")]
+    assert aggregate(labelled)["kind"] == "b: 2, a: 1, c: 1"  # the failed rows (a, a) are not counted
 
 
 def test_deadline_interrupts_python_loops_and_leaves_no_stray_exception():

@@ -112,9 +112,11 @@ def patches_metrics(report: dict) -> dict:
 
 
 def shape_metrics(report: dict) -> dict:
-    """``nurbskit shape``'s headline: the input-to-surface distance (the kind chosen is in each report)."""
+    """``nurbskit shape``'s headline: the kind fitted (``revolution``, ``extrusion`` or the
+    free-form fallback of ``--kind auto``: a label, counted per kind in the aggregate) and
+    the input-to-surface distance, mean and p95, as fractions of the diagonal."""
     m = report.get("metrics", {})
-    return {"to_surface_mean": _number(m.get("to_surface_mean")),
+    return {"kind": str(report.get("kind", "")), "to_surface_mean": _number(m.get("to_surface_mean")),
             "to_surface_p95": _number(m.get("to_surface_p95"))}
 
 

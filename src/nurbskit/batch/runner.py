@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Sequence
 
 from .._optional import require
 from ..errors import OptionError
-from .commands import BatchCommand, Item, get_command
+from .commands import COMMANDS, BatchCommand, Item, get_command
 from .inputs import find_items
 from .summary import write_summary
 from .task import MARKER, command_args, fingerprint, packed_task, read_marker
@@ -265,6 +265,9 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise OptionError(f"--out {out}: expected a directory, found an existing file")
+    if command.name == "fit" and any(o.split("=", 1)[0] == "--kind" for o in options) and "shape" in COMMANDS:
+        raise OptionError("-- --kind: nurbskit fit fits free-form surfaces; for a surface of revolution or an "
+                          "extrusion run 'nurbskit batch shape INPUTS... -- --kind revolution|extrusion|auto'")
     items = find_items(inputs, command, exclude=out)
     # Parse the options once here, so that a typo fails now and not once per item.
     command_args(command, items[0], out / items[0].name, options)
