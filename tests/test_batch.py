@@ -240,6 +240,13 @@ def test_killed_worker_is_recorded_and_the_others_finish(client, tmp_path):
     assert {p: p.stat().st_mtime_ns for p in out.glob("[abcd]/*")} == stamps
 
 
+def test_local_workers_allocate_like_a_plain_process(client):
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ (which pins glibc's mmap threshold and, for a
+    # fit, doubles the CPU time in page faults); the batch's local cluster leaves it unset.
+    env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    assert len(env) == 2 and set(env.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+
+
 def test_memory_limit_kills_the_worker_and_the_input_is_recorded(client, tmp_path):
     inputs = _probes(tmp_path / "in", {"hog": "hog", "x": "xx"})
     records = _by_name(nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", client=client, memory_limit="1.5GB"))

@@ -122,6 +122,12 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         "distributed.scheduler.worker-saturation": 1.0,
         # the items are independent: nothing to steal or rebalance between workers
         "distributed.scheduler.work-stealing": False,
+        # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which also fixes
+        # glibc's mmap threshold at 128 kB: every tensor above it is mapped and unmapped
+        # again, and a fit spends as much CPU time in page faults as in its own work (1.9x
+        # the CPU time of the same fit in a plain process; benchmarks/results/batch.md).
+        # Unset, the workers allocate as any Python process does (the API in a loop).
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
     }
     with dask.config.set(config), _workers_ignore_ctrl_c():
         cluster = distributed.LocalCluster(
@@ -349,14 +355,19 @@ def window_size(client) -> int:
 
 
 def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
-    """Submit one task per item (a window at a time) and collect the records as they finish."""
+    """Submit one task per item (a window at a time) and collect the records as they finish.
+
+    The loop sleeps until a task finishes (each future's done-callback wakes it) or a
+    second has passed (for the progress bar's running count), so the next item is
+    submitted as soon as a worker thread is free: no polling interval between items.
+    """
+    import threading
     from collections import deque
 
-    distributed = _distributed()
     token = uuid.uuid4().hex[:8]
     queue = deque(enumerate(todo))
     in_flight: dict[str, tuple] = {}
-    ac = distributed.as_completed([], with_results=False, loop=client.loop)
+    woken = threading.Event()
     failed = sum(r["status"] != "ok" for r in records.values())
     retries_hint = (f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None
                     else "attempts as the scheduler's allowed-failures permits")
@@ -373,13 +384,15 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
         futures = client.map(pickle.loads, payloads, key=keys, pure=False)
         for future, item in zip(futures, items):
             in_flight[future.key] = (future, item)
-            ac.add(future)
+            future.add_done_callback(lambda _: woken.set())
 
-    last_poll, running = 0.0, 0
+    last_poll, running = time.monotonic(), 0
     try:
         top_up()
         while in_flight:
-            batch = ac.next_batch(block=False)
+            woken.wait(timeout=max(0.0, 1.0 - (time.monotonic() - last_poll)))
+            woken.clear()  # before looking: a task finishing from now on wakes the next wait
+            batch = [future for future, _ in in_flight.values() if future.done()]
             finished = [f for f in batch if f.status == "finished"]
             results = client.gather(finished, errors="skip") if finished else []
             got = {f.key: r for f, r in zip(finished, results)} if len(results) == len(finished) else {}
@@ -401,16 +414,14 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
             if batch:
                 top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
-                continue
             now = time.monotonic()
-            if now - last_poll > 1.0:
+            if now - last_poll >= 1.0:
                 last_poll = now
                 with contextlib.suppress(Exception):
                     running = sum(1 for keys_ in client.processing().values() for k in keys_ if k in in_flight)
                 window = window_size(client)  # workers may have come or gone
                 top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
-            time.sleep(0.05)
     finally:
         if in_flight:
             with contextlib.suppress(Exception):
