@@ -252,7 +252,8 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
 
     Returns:
         One record per item, in input order: ``input``, ``name``, ``status`` (``ok`` or
-        ``failed``), ``error``, ``seconds``, ``metrics`` (a dict), ``resumed``, ``worker``.
+        ``failed``), ``error``, ``seconds``, ``cpu_seconds`` (on its worker; 0 when resumed from
+        an older marker), ``metrics`` (a dict), ``resumed``, ``worker``.
 
     Raises NurbskitError before any work starts for bad inputs or options; a failure
     of one item is a record, never an exception. KeyboardInterrupt passes through after
@@ -354,6 +355,14 @@ def window_size(client) -> int:
     return max(1, threads)
 
 
+def _input_bytes(item: Item) -> int:
+    total = 0
+    for path in item.paths:
+        with contextlib.suppress(OSError):
+            total += os.stat(path).st_size
+    return total
+
+
 def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
     """Submit one task per item (a window at a time) and collect the records as they finish.
 
@@ -365,7 +374,9 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
     from collections import deque
 
     token = uuid.uuid4().hex[:8]
-    queue = deque(enumerate(todo))
+    # Largest inputs first (by size on disk, a proxy for their work): the last items to
+    # start are the short ones, so the workers finish close together.
+    queue = deque(sorted(enumerate(todo), key=lambda pair: -_input_bytes(pair[1])))
     in_flight: dict[str, tuple] = {}
     woken = threading.Event()
     failed = sum(r["status"] != "ok" for r in records.values())
@@ -392,12 +403,13 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
         while in_flight:
             woken.wait(timeout=max(0.0, 1.0 - (time.monotonic() - last_poll)))
             woken.clear()  # before looking: a task finishing from now on wakes the next wait
-            batch = [future for future, _ in in_flight.values() if future.done()]
-            finished = [f for f in batch if f.status == "finished"]
+            batch = [(future, in_flight.pop(key)[1]) for key, (future, _) in list(in_flight.items()) if future.done()]
+            if batch:
+                top_up()  # the freed worker threads get their next items before the results travel here
+            finished = [f for f, _ in batch if f.status == "finished"]
             results = client.gather(finished, errors="skip") if finished else []
             got = {f.key: r for f, r in zip(finished, results)} if len(results) == len(finished) else {}
-            for future in batch:
-                _, item = in_flight.pop(future.key)
+            for future, item in batch:
                 record = got.get(future.key)
                 if record is None:
                     if future.status == "finished":
@@ -412,7 +424,6 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
                 failed += record["status"] != "ok"
                 notify({"event": "result", "record": record})
             if batch:
-                top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
             now = time.monotonic()
             if now - last_poll >= 1.0:
