@@ -247,6 +247,22 @@ def test_local_workers_allocate_like_a_plain_process(client):
     assert len(env) == 2 and set(env.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
 
 
+def test_dataframe_return_needs_pandas(client, tmp_path, monkeypatch):
+    inputs = _probes(tmp_path / "in", {"a": "aa", "b": "bbb", "bad": "bad"})
+    try:
+        import pandas
+    except ImportError:
+        pandas = None
+    if pandas is not None:
+        df = nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", client=client, dataframe=True)
+        assert list(df["name"]) == ["a", "b", "bad"] and list(df["status"]) == ["ok", "ok", "failed"]
+        assert list(df["value"])[:2] == [2.0, 3.0]
+    monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas -> ImportError
+    with pytest.raises(OptionError, match="needs pandas"):
+        nurbskit.batch.run(PROBE, [inputs], tmp_path / "out2", client=client, dataframe=True)
+    assert not (tmp_path / "out2").exists()  # refused before any work
+
+
 def test_memory_limit_kills_the_worker_and_the_input_is_recorded(client, tmp_path):
     inputs = _probes(tmp_path / "in", {"hog": "hog", "x": "xx"})
     records = _by_name(nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", client=client, memory_limit="1.5GB"))
@@ -287,10 +303,27 @@ def test_local_cluster_processes_end_with_the_run(tmp_path):
         if event["event"] == "started":
             seen.extend(p for p in _cluster_processes(os.getpid()) if p.pid not in others)
             assert event["workers"] == 2 and event["scheduler"].startswith("tcp://127.0.0.1:")
+            dashboards.append(event["dashboard"])
+            if event["dashboard"] is not None:  # with bokeh: the page answers, on loopback
+                import urllib.request
+
+                assert event["dashboard"].startswith("http://127.0.0.1:")
+                with urllib.request.urlopen(event["dashboard"], timeout=30) as response:
+                    assert response.status == 200
+
+    dashboards = []
 
     records = nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", workers=2, progress=progress)
     assert [r["status"] for r in records] == ["ok", "ok"]
     assert {r["metrics"]["pid"] for r in records} <= {p.pid for p in seen}  # the items ran in those processes
+    import importlib.util
+
+    from _extras import extras_required
+
+    has_bokeh = importlib.util.find_spec("bokeh") is not None
+    if not has_bokeh and extras_required():
+        pytest.fail("NURBSKIT_REQUIRE_EXTRAS is set but bokeh (the [dist] extra's dashboard) is missing")
+    assert (dashboards[0] is not None) == has_bokeh  # no address printed that would answer "install bokeh"
     assert len(seen) >= 2
     gone, alive = psutil.wait_procs(seen, timeout=30)
     assert alive == [], f"left running: {[(p.pid, _cmdline(p)) for p in alive]}"
