@@ -245,6 +245,9 @@ def test_local_workers_allocate_like_a_plain_process(client):
     # fit, doubles the CPU time in page faults); the batch's local cluster leaves it unset.
     env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
     assert len(env) == 2 and set(env.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+    # and without the statistical profiler sampling the fits' stacks every 10 ms
+    profiling = client.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
+    assert set(profiling.values()) == {False}
 
 
 def test_dataframe_return_needs_pandas(client, tmp_path, monkeypatch):

@@ -128,6 +128,10 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         # the CPU time of the same fit in a plain process; benchmarks/results/batch.md).
         # Unset, the workers allocate as any Python process does (the API in a loop).
         "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+        # The worker's statistical profiler walks every thread's stack each 10 ms; the
+        # fitting loops' deep Python stacks made that 8-15 % of an item's CPU time
+        # (measured, 3 ABC clouds, on and off twice). The dashboard's Profile page is the price.
+        "distributed.worker.profile.enabled": False,
     }
     with dask.config.set(config), _workers_ignore_ctrl_c():
         cluster = distributed.LocalCluster(
