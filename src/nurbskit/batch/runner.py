@@ -133,17 +133,21 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         # (measured, 3 ABC clouds, on and off twice). The dashboard's Profile page is the price.
         "distributed.worker.profile.enabled": False,
     }
-    with dask.config.set(config), _workers_ignore_ctrl_c():
-        cluster = distributed.LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
-            dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
-            silence_logs=logging.CRITICAL,
-        )
-    try:
-        with distributed.Client(cluster, set_as_default=False) as own:
-            yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
-    finally:
-        cluster.close()
+    # Held for the cluster's whole life, not only its start: a nanny keeps a shallow copy of
+    # the configuration, whose nested settings revert when the context ends, and a worker
+    # it restarts (after a crash or the memory limit) would start with Dask's defaults.
+    with dask.config.set(config):
+        with _workers_ignore_ctrl_c():
+            cluster = distributed.LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
+                dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
+                silence_logs=logging.CRITICAL,
+            )
+        try:
+            with distributed.Client(cluster, set_as_default=False) as own:
+                yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
+        finally:
+            cluster.close()
 
 
 @contextlib.contextmanager
