@@ -7,15 +7,27 @@ Questions and method:
    thesis inputs (``thesis_nurbsdiff/meshes/*.off``, 15 meshes and point samples, and
    ``pointclouds_rows/*.txt``, 5 row-structured clouds), 26 in all, through ``fit`` with
    the default pipeline and ``FIT_OPTIONS`` (fewer iterations and points than the
-   default, so that the three runs fit in minutes). Each batch runs on a local cluster
-   made by :func:`nurbskit.batch.runner.connect`; the cluster is started and every
-   worker warmed (one fit each, which imports torch's optimizer machinery) before the
-   clock starts; start-up is timed separately. Throughput = items / wall seconds.
-2. **Per-task overhead** (goal <= 0.3 s): (batch wall time on 1 worker - the same items
-   through the same per-item function, :func:`nurbskit.batch.task.run_item`, in a loop
-   in this process, warmed the same way) / items. Both write every output. Under load
-   the two runs see different contention, so the batch's own cost is also measured
-   within the 1-worker run: (wall time - the sum of the items' own seconds) / items.
+   default, so that the three runs fit in minutes; ``--iters N`` lowers them further).
+   Each batch runs on a local cluster made by :func:`nurbskit.batch.runner.connect`;
+   the cluster is started and every worker warmed (one fit each, which imports torch's
+   optimizer machinery) before the clock starts; start-up is timed separately.
+   Throughput = items / wall seconds.
+2. **Per-task overhead** (goal <= 0.3 s), three ways:
+   - against the API in a loop: (batch wall on 1 worker - the same items through the
+     same per-item function, :func:`nurbskit.batch.task.run_item`, in a loop in this
+     process, warmed the same way) / items. Under load the two runs see different
+     contention, so this one is noisy;
+   - within each batch run: (workers x wall - the sum of the items' own seconds) /
+     items, the worker-seconds per item spent outside an item (dispatch, transfer,
+     idle waiting), and each worker's idle fraction (1 - its items' seconds / wall);
+   - in CPU time, which load hardly changes: (CPU seconds of the workers and of this
+     process, which runs the client and the local scheduler - the loop's CPU seconds) /
+     items (psutil; ``cpu_seconds`` of each record is its worker's CPU time during the
+     item).
+   The speedup is judged with efficiency = workers' CPU seconds / (wall x workers): 1
+   when every worker had a core all the time; on a loaded machine it shows how much of
+   the ratio the other processes took. Projected ratio on an idle machine: 2 x (CPU
+   seconds per item on 1 worker + dispatch wall per item) / (the same on 2 workers).
 3. **Scheduler memory, 10,000 queued inputs** (goal < 300 MB): a separate ``dask
    scheduler`` process with no worker; ``nurbskit.batch.run`` submits 10,000 synthetic
    inputs (empty files of a command defined here, never run); the scheduler's resident
@@ -28,8 +40,11 @@ Timings on the shared 2-core machine are contended (load is recorded with each r
 the ratio of 2 to 1 workers is the number to re-run on a quiet machine. Memory and
 counts do not depend on load.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 5 minutes on a quiet
-2-core machine, 30 contended; ``--quick``: 6 inputs; ``--memory-only``: the memory part).
+Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 10 minutes on a quiet
+2-core machine, 30-60 contended; writes ``results/batch.json`` and ``batch.md``).
+``--quick``: 6 inputs, few iterations (``batch_quick``); ``--iters N``: fewer fit
+iterations (stated in the results); ``--skip-memory``: no scheduler-memory part (it is
+also run alone by ``--memory-only``, into ``batch_memory``).
 """
 
 from __future__ import annotations
@@ -79,19 +94,28 @@ def _warm(options):
     return os.getpid()
 
 
-def loop_seconds(files, out) -> tuple[float, list[dict]]:
+def loop_seconds(files, out) -> tuple[float, float, list[dict]]:
+    """The items through :func:`run_item` in a loop here: wall seconds, CPU seconds, records."""
     from nurbskit.batch import find_items, get_command
     from nurbskit.batch.task import run_item
 
     command = get_command("fit")
     items = find_items(files, command)
     _warm(FIT_OPTIONS)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     records = [run_item(it, command=command, out_root=str(out), options=FIT_OPTIONS, threads=1) for it in items]
-    return time.perf_counter() - start, records
+    return time.perf_counter() - start, time.process_time() - cpu, records
+
+
+def _cpu(pid: int) -> float:
+    import psutil
+
+    t = psutil.Process(pid).cpu_times()
+    return t.user + t.system
 
 
 def batch_seconds(files, out, workers: int) -> dict:
+    """One batch on a fresh local cluster of ``workers``: wall and CPU seconds of each part."""
     import nurbskit.batch
     from nurbskit.batch.runner import connect
 
@@ -101,11 +125,21 @@ def batch_seconds(files, out, workers: int) -> dict:
         t1 = time.perf_counter()
         pids = client.run(_warm, FIT_OPTIONS)
         t2 = time.perf_counter()
+        cpu_before = {pid: _cpu(pid) for pid in pids.values()}
+        here_before = time.process_time()
         records = nurbskit.batch.run("fit", files, out, client=client, options=FIT_OPTIONS)
         t3 = time.perf_counter()
+        here = time.process_time() - here_before
+        worker_cpu = {pid: _cpu(pid) - before for pid, before in cpu_before.items()}
     t4 = time.perf_counter()
-    return {"workers": workers, "start_seconds": t1 - t0, "warm_seconds": t2 - t1, "wall_seconds": t3 - t2,
-            "close_seconds": t4 - t3, "worker_pids": sorted(pids.values()), "records": records}
+    wall = t3 - t2
+    busy = {pid: sum(r["seconds"] for r in records if r["worker"].endswith(f":{pid}")) for pid in pids.values()}
+    return {"workers": workers, "start_seconds": t1 - t0, "warm_seconds": t2 - t1, "wall_seconds": wall,
+            "close_seconds": t4 - t3, "worker_pids": sorted(pids.values()), "records": records,
+            "worker_cpu_seconds": [worker_cpu[p] for p in sorted(worker_cpu)],
+            "worker_idle_fraction": [1 - busy[p] / wall for p in sorted(busy)],
+            "client_scheduler_cpu_seconds": here,
+            "efficiency": sum(worker_cpu.values()) / (wall * workers)}
 
 
 # --- a synthetic command for the scheduler-memory measurement (never run: no worker) ----------
@@ -208,6 +242,10 @@ def scheduler_memory(n: int = 10_000, all_at_once: bool = False, packed: bool = 
             "per_input_kb": (seen["rss"] - before) / n / 1024, "tasks_on_scheduler": seen["tasks"]}
 
 
+def _option(name: str, default=None):
+    return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
+
+
 def main() -> None:
     from _harness import write_results
 
@@ -215,70 +253,99 @@ def main() -> None:
     if "--quick" in sys.argv:  # make bench --quick: 2 ABC clouds and 4 thesis inputs, few iterations
         files = files[:2] + files[6:10]
         FIT_OPTIONS[:] = ["--iters", "10", "--max-points", "1000", "--no-figures"]
+    if _option("--iters"):
+        FIT_OPTIONS[FIT_OPTIONS.index("--iters") + 1] = str(int(_option("--iters")))
     load_before = os.getloadavg()
-    result = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        loop_t, loop_records = loop_seconds(files, tmp / "loop")
+        loop_t, loop_cpu, loop_records = loop_seconds(files, tmp / "loop")
         one = batch_seconds(files, tmp / "one", 1)
         two = batch_seconds(files, tmp / "two", 2)
-    n = len(files)
-    ok = [sum(r["status"] == "ok" for r in recs) for recs in (loop_records, one["records"], two["records"])]
-    result["memory"] = scheduler_memory()
-    result["memory_all_at_once"] = scheduler_memory(all_at_once=True)
-    result["memory_all_at_once_unpacked"] = scheduler_memory(all_at_once=True, packed=False)
     load_after = os.getloadavg()
+    n = len(files)
+    result = {}
+    if "--skip-memory" not in sys.argv:
+        result["memory"] = scheduler_memory()
+        result["memory_all_at_once"] = scheduler_memory(all_at_once=True)
+        result["memory_all_at_once_unpacked"] = scheduler_memory(all_at_once=True, packed=False)
+    ok = [sum(r["status"] == "ok" for r in recs) for recs in (loop_records, one["records"], two["records"])]
+
+    def derived(run: dict) -> dict:
+        w, wall = run["workers"], run["wall_seconds"]
+        item_s = sum(r["seconds"] for r in run["records"])
+        item_cpu = sum(r["cpu_seconds"] for r in run["records"])
+        cpu = sum(run["worker_cpu_seconds"]) + run["client_scheduler_cpu_seconds"]
+        return {"overhead_wall_s": (w * wall - item_s) / n, "idle_fraction": max(run["worker_idle_fraction"]),
+                "worker_cpu_s": sum(run["worker_cpu_seconds"]), "cpu_per_item_s": item_cpu / n,
+                "overhead_cpu_s": (cpu - loop_cpu) / n, "efficiency": run["efficiency"],
+                "cpu_share": item_cpu / item_s, "dispatch_wall_s": (w * wall - item_s) / n}
+
+    d1, d2 = derived(one), derived(two)
+    speedup = one["wall_seconds"] / two["wall_seconds"]
+    projected = 2 * (d1["cpu_per_item_s"] + d1["dispatch_wall_s"]) / (d2["cpu_per_item_s"] + d2["dispatch_wall_s"])
     rows = [
         {"run": "API in a loop (this process)", "workers": 0, "items": n, "ok": ok[0], "wall_s": loop_t,
-         "items_per_s": n / loop_t, "start_s": 0.0, "overhead_per_item_s": 0.0},
+         "items_per_s": n / loop_t, "start_s": 0.0, "overhead_vs_loop_s": 0.0, "overhead_wall_s": 0.0,
+         "idle_fraction": 0.0, "worker_cpu_s": loop_cpu, "cpu_per_item_s": loop_cpu / n, "overhead_cpu_s": 0.0,
+         "efficiency": loop_cpu / loop_t},
         {"run": "batch, 1 worker", "workers": 1, "items": n, "ok": ok[1], "wall_s": one["wall_seconds"],
          "items_per_s": n / one["wall_seconds"], "start_s": one["start_seconds"] + one["warm_seconds"],
-         "overhead_per_item_s": (one["wall_seconds"] - loop_t) / n},
+         "overhead_vs_loop_s": (one["wall_seconds"] - loop_t) / n, **d1},
         {"run": "batch, 2 workers", "workers": 2, "items": n, "ok": ok[2], "wall_s": two["wall_seconds"],
          "items_per_s": n / two["wall_seconds"], "start_s": two["start_seconds"] + two["warm_seconds"],
-         "overhead_per_item_s": (2 * two["wall_seconds"] - loop_t) / n},
+         "overhead_vs_loop_s": (2 * two["wall_seconds"] - loop_t) / n, **d2},
     ]
-    speedup = one["wall_seconds"] / two["wall_seconds"]
-    mem = result["memory"]
-    cold = (one["wall_seconds"] + one["start_seconds"] + one["warm_seconds"] - loop_t) / n
     meta = {
         "fit_options": FIT_OPTIONS, "inputs": [str(f.relative_to(DATA)) for f in files],
-        "throughput_ratio_2_vs_1": speedup, "goal_ratio": 1.7,
-        "overhead_per_item_s_warm": (one["wall_seconds"] - loop_t) / n,
-        "overhead_per_item_s_with_cluster_start": cold, "goal_overhead_s": 0.3,
-        # Load-independent: on 1 worker the items run one after another, so the wall time
-        # not spent inside run_item (scheduling, transfer, polling) is the batch's own cost.
-        "dispatch_overhead_per_item_s_1_worker": (one["wall_seconds"] - sum(r["seconds"] for r in one["records"])) / n,
-        "scheduler_memory": mem, "scheduler_memory_all_at_once": result["memory_all_at_once"],
-        "scheduler_memory_all_at_once_unpacked": result["memory_all_at_once_unpacked"], "goal_scheduler_mb": 300,
+        "throughput_ratio_2_vs_1": speedup, "projected_ratio_idle_machine": projected, "goal_ratio": 1.7,
+        "overhead_per_item_s_vs_loop": (one["wall_seconds"] - loop_t) / n,
+        "overhead_per_item_s_within_1_worker": d1["overhead_wall_s"],
+        "overhead_per_item_s_within_2_workers": d2["overhead_wall_s"],
+        "overhead_per_item_cpu_s_1_worker": d1["overhead_cpu_s"], "goal_overhead_s": 0.3,
+        "loop_cpu_seconds": loop_cpu, "runs": {"one": {k: v for k, v in one.items() if k != "records"},
+                                               "two": {k: v for k, v in two.items() if k != "records"}},
         "load_average_before": load_before, "load_average_after": load_after, "cpu_count": os.cpu_count(),
         "contended": max(load_before[0], load_after[0]) > (os.cpu_count() or 1),
         "item_seconds": {name: [r["seconds"] for r in recs] for name, recs in
                          (("loop", loop_records), ("one", one["records"]), ("two", two["records"]))},
+        "item_cpu_seconds": {name: [r["cpu_seconds"] for r in recs] for name, recs in
+                             (("loop", loop_records), ("one", one["records"]), ("two", two["records"]))},
+        **{f"scheduler_{k}": v for k, v in result.items()},
     }
+    memory_note = ""
+    if result:
+        mem = result["memory"]
+        memory_note = (
+            f"Scheduler with 10,000 queued inputs: **{mem['scheduler_rss_queued_mb']:.0f} MB** "
+            f"({mem['scheduler_rss_before_mb']:.0f} MB empty; {mem['tasks_on_scheduler']} tasks on it at a time; "
+            f"submitted all at once {result['memory_all_at_once']['scheduler_rss_queued_mb']:.0f} MB packed, "
+            f"{result['memory_all_at_once_unpacked']['scheduler_rss_queued_mb']:.0f} MB as nurbskit objects; "
+            f"goal < 300 MB). ")
     notes = (
-        f"{n} inputs (ABC clouds, thesis meshes/clouds) through `nurbskit batch fit` {' '.join(FIT_OPTIONS)}. "
-        f"Throughput 2 vs 1 workers: **{speedup:.2f}x** (goal >= 1.7x). Per-item overhead against the API in a loop: "
-        f"**{meta['overhead_per_item_s_warm']:.3f} s** warm, {cold:.3f} s counting cluster start and warm-up "
-        f"(goal <= 0.3 s); on 1 worker, wall time outside the items: "
-        f"**{meta['dispatch_overhead_per_item_s_1_worker']:.3f} s** per item (does not depend on load). Scheduler with 10,000 queued inputs: **{mem['scheduler_rss_queued_mb']:.0f} MB** "
-        f"({mem['scheduler_rss_before_mb']:.0f} MB empty; {mem['tasks_on_scheduler']} tasks on it at a time, the rest "
-        f"queued in the client; submitted all at once they take "
-        f"{result['memory_all_at_once']['scheduler_rss_queued_mb']:.0f} MB packed, "
-        f"{result['memory_all_at_once_unpacked']['scheduler_rss_queued_mb']:.0f} MB as nurbskit objects "
-        f"(the scheduler then imports torch); goal < 300 MB). "
-        f"Load average before/after: {load_before[0]:.1f} / {load_after[0]:.1f} on {os.cpu_count()} cores"
+        f"{n} inputs (6 ABC clouds, 20 thesis meshes/clouds) through `nurbskit batch fit` {' '.join(FIT_OPTIONS)}. "
+        f"Throughput 2 vs 1 workers: **{speedup:.2f}x** (goal >= 1.7x); efficiency (workers' CPU s / (wall x "
+        f"workers)) {d1['efficiency']:.2f} on 1 worker, {d2['efficiency']:.2f} on 2; projected on an idle machine "
+        f"from CPU time per item and dispatch time: **{projected:.2f}x**. Per-item overhead: "
+        f"**{d1['overhead_wall_s']:.3f} s** of wall time outside the items on 1 worker "
+        f"({d2['overhead_wall_s']:.3f} worker-s on 2; largest worker idle fraction {d1['idle_fraction']:.3f} / "
+        f"{d2['idle_fraction']:.3f}); in CPU time against the loop **{d1['overhead_cpu_s']:+.3f} s** (1 worker: "
+        f"worker + client + scheduler CPU - the loop's CPU, per item); wall against the loop "
+        f"{meta['overhead_per_item_s_vs_loop']:+.3f} s (noisy under load) (goal <= 0.3 s). "
+        f"CPU share of the items (their CPU s / their wall s): loop {loop_cpu / sum(r['seconds'] for r in loop_records):.2f}, "
+        f"1 worker {d1['cpu_share']:.2f}, 2 workers {d2['cpu_share']:.2f}. " + memory_note
+        + f"Load average before/after: {load_before[0]:.1f} / {load_after[0]:.1f} on {os.cpu_count()} cores"
         + (" -- CONTENDED: the machine was shared; re-run quiet for the scaling ratio." if meta["contended"] else ".")
-        + " 'overhead_per_item_s' for 2 workers is 2 x wall - loop, per item (worker-seconds spent beyond the loop's)."
     )
     columns = [("run", "run"), ("workers", "workers"), ("items", "items"), ("ok", "ok"), ("wall_s", "wall s"),
                ("items_per_s", "items/s"), ("start_s", "cluster start + warm-up s"),
-               ("overhead_per_item_s", "overhead per item s")]
+               ("overhead_wall_s", "wall outside items per item s"), ("idle_fraction", "worker idle fraction (max)"),
+               ("worker_cpu_s", "CPU s (workers)"), ("cpu_per_item_s", "CPU s per item"),
+               ("overhead_cpu_s", "CPU overhead per item s"), ("efficiency", "efficiency"),
+               ("overhead_vs_loop_s", "wall overhead vs loop per item s")]
     name = "batch_quick" if "--quick" in sys.argv else "batch"  # a quick run never replaces the full one
     path = write_results(name, rows, columns, meta=meta, title="nurbskit batch: 1 vs 2 workers, overhead, memory",
                          notes=notes)
     print(path.read_text())
-    print(json.dumps(mem, indent=1))
 
 
 def memory_only() -> None:

@@ -240,6 +240,34 @@ def test_killed_worker_is_recorded_and_the_others_finish(client, tmp_path):
     assert {p: p.stat().st_mtime_ns for p in out.glob("[abcd]/*")} == stamps
 
 
+def test_local_workers_allocate_like_a_plain_process(client):
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ (which pins glibc's mmap threshold and, for a
+    # fit, doubles the CPU time in page faults); the batch's local cluster leaves it unset,
+    # also in a worker its nanny restarted (found by running this after the killed-worker test).
+    client.restart_workers([next(iter(client.scheduler_info()["workers"]))])
+    env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    assert len(env) == 2 and set(env.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+    # and without the statistical profiler sampling the fits' stacks every 10 ms
+    profiling = client.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
+    assert set(profiling.values()) == {False}
+
+
+def test_dataframe_return_needs_pandas(client, tmp_path, monkeypatch):
+    inputs = _probes(tmp_path / "in", {"a": "aa", "b": "bbb", "bad": "bad"})
+    try:
+        import pandas
+    except ImportError:
+        pandas = None
+    if pandas is not None:
+        df = nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", client=client, dataframe=True)
+        assert list(df["name"]) == ["a", "b", "bad"] and list(df["status"]) == ["ok", "ok", "failed"]
+        assert list(df["value"])[:2] == [2.0, 3.0]
+    monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas -> ImportError
+    with pytest.raises(OptionError, match="needs pandas"):
+        nurbskit.batch.run(PROBE, [inputs], tmp_path / "out2", client=client, dataframe=True)
+    assert not (tmp_path / "out2").exists()  # refused before any work
+
+
 def test_memory_limit_kills_the_worker_and_the_input_is_recorded(client, tmp_path):
     inputs = _probes(tmp_path / "in", {"hog": "hog", "x": "xx"})
     records = _by_name(nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", client=client, memory_limit="1.5GB"))
@@ -280,10 +308,27 @@ def test_local_cluster_processes_end_with_the_run(tmp_path):
         if event["event"] == "started":
             seen.extend(p for p in _cluster_processes(os.getpid()) if p.pid not in others)
             assert event["workers"] == 2 and event["scheduler"].startswith("tcp://127.0.0.1:")
+            dashboards.append(event["dashboard"])
+            if event["dashboard"] is not None:  # with bokeh: the page answers, on loopback
+                import urllib.request
+
+                assert event["dashboard"].startswith("http://127.0.0.1:")
+                with urllib.request.urlopen(event["dashboard"], timeout=30) as response:
+                    assert response.status == 200
+
+    dashboards = []
 
     records = nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", workers=2, progress=progress)
     assert [r["status"] for r in records] == ["ok", "ok"]
     assert {r["metrics"]["pid"] for r in records} <= {p.pid for p in seen}  # the items ran in those processes
+    import importlib.util
+
+    from _extras import extras_required
+
+    has_bokeh = importlib.util.find_spec("bokeh") is not None
+    if not has_bokeh and extras_required():
+        pytest.fail("NURBSKIT_REQUIRE_EXTRAS is set but bokeh (the [dist] extra's dashboard) is missing")
+    assert (dashboards[0] is not None) == has_bokeh  # no address printed that would answer "install bokeh"
     assert len(seen) >= 2
     gone, alive = psutil.wait_procs(seen, timeout=30)
     assert alive == [], f"left running: {[(p.pid, _cmdline(p)) for p in alive]}"
@@ -422,6 +467,72 @@ def test_curves_and_patches_run_through_the_registry(client, tmp_path):
     assert set(nurbskit.batch.COMMANDS) >= {"fit", "volume", "patches", "shape", "curves"}
 
 
+def test_shape_through_the_cli_on_the_cluster_kind_per_input(client, tmp_path, capsys):
+    # `nurbskit batch shape ... -- --kind auto` (the issue's `fit --kind ...`): a vase of
+    # revolution and an extruded wave; the summary names the kind fitted to each.
+    g = np.random.default_rng(0)
+    folder = tmp_path / "clouds"
+    folder.mkdir()
+    t, z = g.random(400) * 2 * np.pi, g.random(400) * 2
+    r = 1 + 0.3 * np.sin(2 * z)
+    np.savetxt(folder / "vase.xyz", np.column_stack([r * np.cos(t), r * np.sin(t), z]))
+    x, h = g.random(400) * 3, g.random(400) * 2
+    np.savetxt(folder / "wave.xyz", np.column_stack([x, 0.5 * np.sin(2 * x), h]))
+    from nurbskit.cli import main
+
+    out = tmp_path / "shapes"
+    code = main(["batch", "shape", str(folder), "--out", str(out), "--scheduler", client.scheduler.address,
+                 "--quiet", "--", "--kind", "auto", "--iters", "5", "--no-figures"])
+    assert code == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    rows = _by_name(summary["rows"])
+    assert (rows["vase"]["kind"], rows["wave"]["kind"]) == ("revolution", "extrusion")
+    for name in ("vase", "wave"):
+        report = json.loads((out / name / "report.json").read_text())
+        assert report["kind"] == rows[name]["kind"]
+        assert rows[name]["to_surface_p95"] == report["metrics"]["to_surface_p95"] < 5e-3
+    assert summary["aggregate"]["kind"] in ("revolution: 1, extrusion: 1", "extrusion: 1, revolution: 1")
+    header, *lines = (out / "summary.csv").read_text().strip().splitlines()
+    assert header.split(",")[6] == "kind" and lines[-1].startswith("ALL,")
+    assert (out / "summary.png").stat().st_size > 1000
+
+
+def test_export_json_surfaces_to_step_read_back_by_opencascade(client, tmp_path):
+    import torch
+
+    from _extras import require_extra
+
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad import read_cad
+
+    folder = tmp_path / "surfaces"
+    folder.mkdir()
+    surfaces = {}
+    for i, sizes in enumerate([(4, 4), (5, 4), (4, 6)]):
+        g = torch.Generator().manual_seed(i)
+        surfaces[f"s{i}"] = nurbskit.NURBSSurface(torch.rand(*sizes, 3, dtype=torch.float64, generator=g), (3, 3))
+        nurbskit.core.save(surfaces[f"s{i}"], folder / f"s{i}.json")
+    (folder / "garbage.json").write_text("{not json")
+    (folder / "report.json").write_text("{}")  # a result's side file: no input of a folder search
+    out = tmp_path / "steps"
+    records = _by_name(nurbskit.batch.run("export", [folder], out, client=client, options=["--format", "step"]))
+    assert sorted(records) == ["garbage", "s0", "s1", "s2"]
+    assert records["garbage"]["status"] == "failed" and "garbage.json" in records["garbage"]["error"]
+    assert "\n" not in records["garbage"]["error"] and not (out / "garbage").exists()
+    for name, surface in surfaces.items():
+        assert records[name]["status"] == "ok", records[name]
+        files = {p.name for p in (out / name).iterdir()}
+        assert files == {f"{name}.step", "report.json", MARKER, ".nurbskit-manifest.json"}
+        assert (records[name]["metrics"]["valid"], records[name]["metrics"]["faces"]) == (1.0, 1.0)
+        model = read_cad(out / name / f"{name}.step")  # read back independently of the batch
+        assert len(model.faces) == 1
+        back = model.faces[0].surface
+        assert back.sizes == surface.sizes
+        assert_close(back.control_points, surface.control_points, atol=1e-12)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["aggregate"]["status"] == "3 ok, 1 failed" and summary["aggregate"]["valid"] == 1.0
+
+
 # --- no cluster needed -------------------------------------------------------------------------
 
 def test_import_does_not_load_dask():
@@ -451,6 +562,8 @@ def test_options_are_checked_before_any_work(tmp_path, monkeypatch, clouds, caps
         nurbskit.batch.run("fit", [clouds], tmp_path / "o", options=["--out", "x"])
     assert main(["batch", "fit", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "missing: no such file or folder" in capsys.readouterr().err
+    assert main(["batch", "fit", str(clouds), "--out", str(tmp_path / "o"), "--", "--kind", "revolution"]) == 2
+    assert "nurbskit batch shape" in capsys.readouterr().err  # fit --kind: the exact shapes are `shape`
     assert main(["batch", "nope", str(clouds), "--out", str(tmp_path / "o")]) == 2
     assert "COMMAND: expected one of" in capsys.readouterr().err
     assert main(["batch", "fit", str(clouds), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
@@ -521,6 +634,9 @@ def test_summary_rows_and_aggregate():
     assert [r["m"] for r in rows][:2] == [1.0, 3.0] and np.isnan(rows[2]["m"]) and np.isnan(rows[1]["k"])
     total = aggregate(records)
     assert (total["status"], total["seconds"], total["m"], total["k"], total["resumed"]) == ("2 ok, 1 failed", 3.5, 2.0, 4.0, 1)
+    # A label metric (strings) is counted per value over the ok rows, most common first.
+    labelled = [{**r, "metrics": {**r["metrics"], "kind": kind}} for r, kind in zip(records * 2, "abacba")]
+    assert aggregate(labelled)["kind"] == "b: 2, a: 1, c: 1"  # the failed rows (a, a) are not counted
 
 
 def test_deadline_interrupts_python_loops_and_leaves_no_stray_exception():

@@ -67,6 +67,8 @@ class BatchCommand:
     ``module`` is the CLI module whose ``register(subparsers)`` adds the parser named
     ``name``; its ``run`` default is called once per item. ``metrics(report)`` returns
     the headline numbers (floats) from the ``report.json`` the command writes.
+    ``skip_names``: file names a folder search passes over although their extension is
+    one of ``extensions`` (``export``: the ``report.json`` of earlier results).
     """
 
     name: str
@@ -77,6 +79,7 @@ class BatchCommand:
     argv: Callable[[Item], list[str]] = positional_argv
     report: str = "report.json"
     description: str = ""
+    skip_names: tuple[str, ...] = ()
 
 
 def _number(value) -> float:
@@ -109,9 +112,11 @@ def patches_metrics(report: dict) -> dict:
 
 
 def shape_metrics(report: dict) -> dict:
-    """``nurbskit shape``'s headline: the input-to-surface distance (the kind chosen is in each report)."""
+    """``nurbskit shape``'s headline: the kind fitted (``revolution``, ``extrusion`` or the
+    free-form fallback of ``--kind auto``: a label, counted per kind in the aggregate) and
+    the input-to-surface distance, mean and p95, as fractions of the diagonal."""
     m = report.get("metrics", {})
-    return {"to_surface_mean": _number(m.get("to_surface_mean")),
+    return {"kind": str(report.get("kind", "")), "to_surface_mean": _number(m.get("to_surface_mean")),
             "to_surface_p95": _number(m.get("to_surface_p95"))}
 
 
@@ -207,3 +212,16 @@ register(BatchCommand(
     name="curves", module="nurbskit.cli.curves_command", extensions=(".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"),
     metrics=curves_metrics, description="fit B-spline curves to each drawing",
 ))
+
+
+def _register_export() -> None:
+    from . import export
+
+    register(BatchCommand(
+        name="export", module="nurbskit.batch.export", extensions=export.EXTENSIONS, metrics=export.export_metrics,
+        skip_names=export.NOT_GEOMETRY,
+        description="write each NURBS or CAD file as STEP, IGES, BREP, .3dm or a mesh into its own folder",
+    ))
+
+
+_register_export()

@@ -68,13 +68,15 @@ def expand_inputs(inputs: Iterable[str | os.PathLike], command: BatchCommand,
 
 def _search(folder: Path, command: BatchCommand, skip: Path | None = None) -> list[Path]:
     extensions = {e.lower() for e in command.extensions}
+    skip_names = set(command.skip_names)
     files = []
     for root, dirs, names in os.walk(folder):
         if skip is not None and Path(root).resolve() == skip:
             dirs[:] = []
             continue
         dirs[:] = sorted(d for d in dirs if not d.startswith("."))  # hidden: temporary outputs, VCS
-        files += [Path(root) / n for n in sorted(names) if not n.startswith(".") and Path(n).suffix.lower() in extensions]
+        files += [Path(root) / n for n in sorted(names)
+                  if not n.startswith(".") and n not in skip_names and Path(n).suffix.lower() in extensions]
     return files
 
 

@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Sequence
 
 from .._optional import require
 from ..errors import OptionError
-from .commands import BatchCommand, Item, get_command
+from .commands import COMMANDS, BatchCommand, Item, get_command
 from .inputs import find_items
 from .summary import write_summary
 from .task import MARKER, command_args, fingerprint, packed_task, read_marker
@@ -122,18 +122,32 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         "distributed.scheduler.worker-saturation": 1.0,
         # the items are independent: nothing to steal or rebalance between workers
         "distributed.scheduler.work-stealing": False,
+        # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which also fixes
+        # glibc's mmap threshold at 128 kB: every tensor above it is mapped and unmapped
+        # again, and a fit spends as much CPU time in page faults as in its own work (1.9x
+        # the CPU time of the same fit in a plain process; benchmarks/results/batch.md).
+        # Unset, the workers allocate as any Python process does (the API in a loop).
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+        # The worker's statistical profiler walks every thread's stack each 10 ms; the
+        # fitting loops' deep Python stacks made that 8-15 % of an item's CPU time
+        # (measured, 3 ABC clouds, on and off twice). The dashboard's Profile page is the price.
+        "distributed.worker.profile.enabled": False,
     }
-    with dask.config.set(config), _workers_ignore_ctrl_c():
-        cluster = distributed.LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
-            dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
-            silence_logs=logging.CRITICAL,
-        )
-    try:
-        with distributed.Client(cluster, set_as_default=False) as own:
-            yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
-    finally:
-        cluster.close()
+    # Held for the cluster's whole life, not only its start: a nanny keeps a shallow copy of
+    # the configuration, whose nested settings revert when the context ends, and a worker
+    # it restarts (after a crash or the memory limit) would start with Dask's defaults.
+    with dask.config.set(config):
+        with _workers_ignore_ctrl_c():
+            cluster = distributed.LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", scheduler_port=0,
+                dashboard_address="127.0.0.1:0", memory_limit=limit if limit is not None else "auto",
+                silence_logs=logging.CRITICAL,
+            )
+        try:
+            with distributed.Client(cluster, set_as_default=False) as own:
+                yield own, {"cluster": "local", "scheduler": cluster.scheduler_address, "workers": n}
+        finally:
+            cluster.close()
 
 
 @contextlib.contextmanager
@@ -246,7 +260,8 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
 
     Returns:
         One record per item, in input order: ``input``, ``name``, ``status`` (``ok`` or
-        ``failed``), ``error``, ``seconds``, ``metrics`` (a dict), ``resumed``, ``worker``.
+        ``failed``), ``error``, ``seconds``, ``cpu_seconds`` (on its worker; 0 when resumed from
+        an older marker), ``metrics`` (a dict), ``resumed``, ``worker``.
 
     Raises NurbskitError before any work starts for bad inputs or options; a failure
     of one item is a record, never an exception. KeyboardInterrupt passes through after
@@ -265,6 +280,9 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise OptionError(f"--out {out}: expected a directory, found an existing file")
+    if command.name == "fit" and any(o.split("=", 1)[0] == "--kind" for o in options) and "shape" in COMMANDS:
+        raise OptionError("-- --kind: nurbskit fit fits free-form surfaces; for a surface of revolution or an "
+                          "extrusion run 'nurbskit batch shape INPUTS... -- --kind revolution|extrusion|auto'")
     items = find_items(inputs, command, exclude=out)
     # Parse the options once here, so that a typo fails now and not once per item.
     command_args(command, items[0], out / items[0].name, options)
@@ -345,15 +363,30 @@ def window_size(client) -> int:
     return max(1, threads)
 
 
+def _input_bytes(item: Item) -> int:
+    total = 0
+    for path in item.paths:
+        with contextlib.suppress(OSError):
+            total += os.stat(path).st_size
+    return total
+
+
 def _follow(client, command, todo, out, options, threads, timeout, records, notify, total, memory_limit, retries):
-    """Submit one task per item (a window at a time) and collect the records as they finish."""
+    """Submit one task per item (a window at a time) and collect the records as they finish.
+
+    The loop sleeps until a task finishes (each future's done-callback wakes it) or a
+    second has passed (for the progress bar's running count), so the next item is
+    submitted as soon as a worker thread is free: no polling interval between items.
+    """
+    import threading
     from collections import deque
 
-    distributed = _distributed()
     token = uuid.uuid4().hex[:8]
-    queue = deque(enumerate(todo))
+    # Largest inputs first (by size on disk, a proxy for their work): the last items to
+    # start are the short ones, so the workers finish close together.
+    queue = deque(sorted(enumerate(todo), key=lambda pair: -_input_bytes(pair[1])))
     in_flight: dict[str, tuple] = {}
-    ac = distributed.as_completed([], with_results=False, loop=client.loop)
+    woken = threading.Event()
     failed = sum(r["status"] != "ok" for r in records.values())
     retries_hint = (f"{retries + 1} attempt{'s' if retries else ''}" if retries is not None
                     else "attempts as the scheduler's allowed-failures permits")
@@ -370,18 +403,21 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
         futures = client.map(pickle.loads, payloads, key=keys, pure=False)
         for future, item in zip(futures, items):
             in_flight[future.key] = (future, item)
-            ac.add(future)
+            future.add_done_callback(lambda _: woken.set())
 
-    last_poll, running = 0.0, 0
+    last_poll, running = time.monotonic(), 0
     try:
         top_up()
         while in_flight:
-            batch = ac.next_batch(block=False)
-            finished = [f for f in batch if f.status == "finished"]
+            woken.wait(timeout=max(0.0, 1.0 - (time.monotonic() - last_poll)))
+            woken.clear()  # before looking: a task finishing from now on wakes the next wait
+            batch = [(future, in_flight.pop(key)[1]) for key, (future, _) in list(in_flight.items()) if future.done()]
+            if batch:
+                top_up()  # the freed worker threads get their next items before the results travel here
+            finished = [f for f, _ in batch if f.status == "finished"]
             results = client.gather(finished, errors="skip") if finished else []
             got = {f.key: r for f, r in zip(finished, results)} if len(results) == len(finished) else {}
-            for future in batch:
-                _, item = in_flight.pop(future.key)
+            for future, item in batch:
                 record = got.get(future.key)
                 if record is None:
                     if future.status == "finished":
@@ -396,18 +432,15 @@ def _follow(client, command, todo, out, options, threads, timeout, records, noti
                 failed += record["status"] != "ok"
                 notify({"event": "result", "record": record})
             if batch:
-                top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
-                continue
             now = time.monotonic()
-            if now - last_poll > 1.0:
+            if now - last_poll >= 1.0:
                 last_poll = now
                 with contextlib.suppress(Exception):
                     running = sum(1 for keys_ in client.processing().values() for k in keys_ if k in in_flight)
                 window = window_size(client)  # workers may have come or gone
                 top_up()
                 notify({"event": "update", "done": len(records), "failed": failed, "running": running, "total": total})
-            time.sleep(0.05)
     finally:
         if in_flight:
             with contextlib.suppress(Exception):

@@ -4,8 +4,9 @@ Columns: ``input`` (what the user named), ``name`` (the output folder), ``status
 or ``failed``), ``error`` (one line), ``seconds`` (the item's own wall time on its worker),
 ``resumed`` (true when ``--resume`` found the item finished and did not run it), then the
 command's headline metrics. The aggregate row (``input`` = ``ALL``) counts ok and failed
-items, sums the seconds and gives the mean of each metric over the ok items. Every file
-is written atomically.
+items, sums the seconds and gives the mean of each metric over the ok items; a metric
+whose values are strings (a label: ``shape``'s ``kind``) is counted per value instead
+(``"revolution: 3, extrusion: 1"``). Every file is written atomically.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import csv
 import json
 import math
 import os
+from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
@@ -53,7 +55,12 @@ def aggregate(records: Sequence[dict]) -> dict:
            "seconds": float(sum(float(r.get("seconds") or 0.0) for r in records)),
            "resumed": sum(bool(r.get("resumed")) for r in records)}
     for name in metric_names(records):
-        values = [float(r["metrics"][name]) for r in ok if name in (r.get("metrics") or {})]
+        present = [r["metrics"][name] for r in ok if name in (r.get("metrics") or {})]
+        labels = [v for v in present if isinstance(v, str)]
+        if labels:
+            row[name] = ", ".join(f"{label}: {count}" for label, count in Counter(labels).most_common())
+            continue
+        values = [float(v) for v in present]
         values = [v for v in values if math.isfinite(v)]
         row[name] = sum(values) / len(values) if values else float("nan")
     return row
@@ -90,7 +97,8 @@ def write_summary(out: str | os.PathLike, records: Sequence[dict], meta: dict, *
 
 
 def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = "") -> Path:
-    """Histograms of each metric and of the seconds per item (ok items), one panel each."""
+    """Histograms of each metric and of the seconds per item (ok items), one panel each;
+    a label metric (strings) as one bar per label."""
     from ..viz.plots import _figure, _save
 
     ok = [r for r in records if r.get("status") == "ok"]
@@ -98,8 +106,14 @@ def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = 
     fig = _figure((3.6 * len(names), 3.2))
     axes = fig.subplots(1, len(names), squeeze=False)[0]
     for ax, name in zip(axes, names):
-        values = [float(r["seconds"]) if name == "seconds" else float((r.get("metrics") or {}).get(name, math.nan))
-                  for r in ok]
+        raw = [r["seconds"] if name == "seconds" else (r.get("metrics") or {}).get(name, math.nan) for r in ok]
+        labels = Counter(v for v in raw if isinstance(v, str))
+        if labels:
+            ax.bar(list(labels), list(labels.values()), color="tab:blue", edgecolor="white")
+            ax.set_xlabel(name)
+            ax.set_ylabel("inputs")
+            continue
+        values = [float(v) for v in raw]
         values = [v for v in values if math.isfinite(v)]
         if values:
             lo, hi = min(values), max(values)

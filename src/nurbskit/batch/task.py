@@ -212,14 +212,16 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
 
     The record: ``name``, ``input`` (what the user named), ``status`` (``ok`` or
     ``failed``), ``error`` (one line, empty when ok), ``seconds`` (this item's wall
-    time), ``metrics`` (the command's headline numbers), ``worker`` (host:pid).
+    time), ``cpu_seconds`` (the CPU time of the worker process meanwhile: with one item
+    per process, the item's), ``metrics`` (the command's headline numbers), ``worker``
+    (host:pid).
     ``task_key`` names the task in the timeout event (see :func:`deadline`).
     """
     out_root_path = Path(out_root)
     out_dir = out_root_path / item.name
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     record = {"name": item.name, "input": item.source, "status": "failed", "error": "", "seconds": 0.0,
-              "metrics": {}, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+              "cpu_seconds": 0.0, "metrics": {}, "worker": f"{socket.gethostname()}:{os.getpid()}"}
     try:
         with deadline(timeout, task_key):
             _forget_marker(out_dir)
@@ -231,7 +233,8 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
                 raise _CommandFailed(one_line(stderr.getvalue(), last=True) or f"{command.name} exited with status {code}")
             with open(out_dir / command.report, encoding="utf-8") as handle:
                 metrics = command.metrics(json.load(handle))
-        done = {**record, "status": "ok", "metrics": metrics, "seconds": time.perf_counter() - start}
+        done = {**record, "status": "ok", "metrics": metrics, "seconds": time.perf_counter() - start,
+                "cpu_seconds": time.process_time() - cpu_start}
         marker = {"version": MARKER_VERSION, "command": command.name, "options": list(options),
                   "inputs": fingerprint(item), "record": done}
         with atomic_open(out_dir / MARKER, encoding="utf-8") as handle:
@@ -246,6 +249,7 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
     except Exception as exc:  # noqa: BLE001 - any failure of one item is recorded, never raised
         record["error"] = describe_error(exc)
     record["seconds"] = time.perf_counter() - start
+    record["cpu_seconds"] = time.process_time() - cpu_start
     return record
 
 

@@ -32,7 +32,6 @@ from pathlib import Path
 from ..errors import OptionError
 
 FORMAT_CHOICES = ("step", "iges", "brep", "3dm", "obj", "ply", "stl", "gltf")
-_MESH_INPUTS = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
 
 
 def register(subparsers) -> None:
@@ -83,33 +82,12 @@ def write_result(obj, path, format: str | None = None, tolerance: float | None =
     return _write(obj, path, format=format, tolerance=tolerance, **kwargs)
 
 
-def _read_input(path: Path) -> list:
-    from ..io.cad import read_objects
-    from ..io.nurbs import is_nurbs_file
-
-    ext = path.suffix.lower()
-    if ext in _MESH_INPUTS and not is_nurbs_file(path):
-        from ..io.mesh import read_mesh
-
-        mesh = read_mesh(path)
-        return [mesh]
-    return read_objects(path)
-
-
 def run_export(args) -> int:
-    from ..io._base import check_readable
+    from ..io.export import export_file
 
-    src = Path(args.input)
-    if src.is_dir() and (src / "report.json").is_file():  # a `nurbskit shape` folder
-        src = src / "report.json"
-    src, out = check_readable(src), Path(args.output)
-    if out.is_dir():
-        raise OptionError(f"{out}: is a directory, expected an output file name")
-    if args.tolerance is not None and not args.tolerance > 0:
-        raise OptionError(f"--tolerance must be positive, got {args.tolerance}")
-    objects = _read_input(src)
-    report = write_result(objects, out, format=args.format, tolerance=args.tolerance, check=not args.no_check,
-                          analytic=not args.bspline)
+    out = Path(args.output)
+    report = export_file(args.input, out, format=args.format, tolerance=args.tolerance, check=not args.no_check,
+                         analytic=not args.bspline)
     parts = [f"wrote {out} ({report['format']}"]
     if "faces" in report:
         parts.append(f", {report['faces']} faces, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")
