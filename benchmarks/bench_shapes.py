@@ -8,16 +8,22 @@ seeds 0-12), 2,000 points each, Gaussian noise of ``--noise`` (default 0.5 %) of
 bounding-box diagonal per coordinate. Revolution: random vases
 (:func:`nurbskit.shapes.synthetic.vase_cloud`, random axis). Extrusion: alternately a
 smooth cubic wave and an L profile, random direction. Each cloud is fitted with its kind
-given (``fit_shape(points, kind)``, defaults: normals by PCA, 30 L-BFGS iterations on
-800 points). Per cloud: the axis angle error of the geometric estimate and after
-refinement (degrees), input-to-surface mean and p95 over the diagonal (the metrics
-module's projection), the **noise floor** (the same mean for the true surface: no fit
-can go below it), truth-to-fit mean (samples of the true surface to the fitted one: the
-error of the surface itself), seconds (wall clock, one cloud after a warm-up cloud),
-and the refinement's projection count. Reported: medians (and the 95th percentile of
-the axis error).
+given (``fit_shape(points, kind, init=--init)``, defaults: normals by PCA, 30 L-BFGS
+iterations on up to 2,000 points, i.e. all of them). Per cloud: the axis angle error of
+the geometric estimate and after refinement (degrees), input-to-surface mean and p95
+over the diagonal (the metrics module's projection), the **noise floor** (the same mean
+for the true surface), the **analytic floor** ``sigma sqrt(2 / pi)`` (the mean absolute
+value of the noise's component along the surface normal, ``sigma`` = ``--noise`` times
+the clean cloud's diagonal, over the noisy cloud's diagonal): for noise much smaller
+than the curvature radii no surface does better on average, so the measured floor must
+equal it (checked: ``floor_over_analytic``), truth-to-fit mean (samples of the true
+surface to the fitted one: the error of the surface itself, which can go below the
+floor), seconds (wall clock, after a warm-up cloud), and the refinement's projection
+count. The kinds alternate cloud by cloud and the results are rewritten every 10
+clouds, so a run stopped early still leaves a consistent table. Reported: medians (and
+the 95th percentile of the axis error).
 
-Run: ``PYTHONPATH=src python benchmarks/bench_shapes.py [--count 50] [--noise 0.005]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_shapes.py [--count 100] [--noise 0.005]``.
 The issue asks for 500 clouds per kind; the committed run used fewer (see the results'
 ``count``), because the machine is shared.
 """
@@ -42,16 +48,22 @@ from nurbskit.shapes import axis_angle_degrees, fit_shape  # noqa: E402
 from nurbskit.shapes.synthetic import extrusion_cloud, vase_cloud  # noqa: E402
 
 
-def one(kind: str, seed: int, noise: float, n: int) -> dict:
+def one(kind: str, seed: int, noise: float, n: int, init: str = "geometric") -> dict:
     if kind == "revolution":
         c = vase_cloud(n, noise, seed)
     else:
         c = extrusion_cloud(n, noise, seed, "L" if seed % 2 else "smooth")
-    geo = fit_shape(c.points, kind, refine=False)
+    geo = fit_shape(c.points, kind, refine=False, init=init)
     t = time.perf_counter()
-    fit = fit_shape(c.points, kind)
+    fit = fit_shape(c.points, kind, init=init)
     seconds = time.perf_counter() - t
     floor = surface_distances(c.surface, c.points)["to_surface_mean"]
+    # sigma is noise times the clean cloud's diagonal (the generator's scale; approximated
+    # by a dense grid on the true surface); the metrics divide by the noisy cloud's diagonal
+    noisy_diag = float((c.points.amax(0) - c.points.amin(0)).norm())
+    grid = c.surface.sample((60, 60)).reshape(-1, 3)
+    clean_diag = float((grid.amax(0) - grid.amin(0)).norm())
+    analytic = noise * math.sqrt(2 / math.pi) * clean_diag / noisy_diag
     truth = c.surface.sample((40, 40)).reshape(-1, 3)
     truth_to_fit = surface_distances(fit.surface, truth)["to_surface_mean"]
     return {
@@ -63,54 +75,72 @@ def one(kind: str, seed: int, noise: float, n: int) -> dict:
         "mean": fit.distance_mean,
         "p95": fit.distance_p95,
         "noise_floor": floor,
+        "analytic_floor": analytic,
+        "floor_over_analytic": floor / analytic if analytic > 0 else float("nan"),
         "truth_to_fit": truth_to_fit,
         "seconds": seconds,
         "projections": fit.iterations,
     }
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--count", type=int, default=50)
-    ap.add_argument("--noise", type=float, default=0.005)
-    ap.add_argument("--points", type=int, default=2000)
-    ap.add_argument("--threads", type=int, default=2)
-    args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    one("revolution", 9999, args.noise, args.points)  # warm-up (imports, first projection)
-    raw = []
-    for kind in ("revolution", "extrusion"):
-        for i in range(args.count):
-            raw.append(one(kind, 10_000 + i, args.noise, args.points))
-            print(kind, i, {k: round(v, 5) for k, v in raw[-1].items() if isinstance(v, float)}, flush=True)
+def summarise(raw: list, args) -> None:
     rows = []
     for kind in ("revolution", "extrusion"):
         r = [x for x in raw if x["kind"] == kind]
+        if not r:
+            continue
         med = {k: statistics.median(x[k] for x in r) for k in r[0] if isinstance(r[0][k], (int, float)) and k != "seed"}
         rows.append({
             "kind": kind, "count": len(r),
             "axis_deg_median": med["axis_deg"],
             "axis_deg_p95": float(np.percentile([x["axis_deg"] for x in r], 95)),
             "axis_deg_geometric_median": med["axis_deg_geometric"],
-            "mean_median": med["mean"], "p95_median": med["p95"],
-            "noise_floor_median": med["noise_floor"],
+            "mean_median": med["mean"], "mean_mean": statistics.fmean(x["mean"] for x in r),
+            "p95_median": med["p95"],
+            "noise_floor_median": med["noise_floor"], "analytic_floor_median": med["analytic_floor"],
+            "floor_over_analytic_median": med["floor_over_analytic"],
             "mean_over_floor_median": statistics.median(x["mean"] / x["noise_floor"] for x in r),
             "truth_to_fit_median": med["truth_to_fit"],
             "seconds_median": med["seconds"], "projections_median": med["projections"],
         })
     cols = [("kind", "kind"), ("count", "clouds"), ("axis_deg_median", "axis err median (deg)"),
             ("axis_deg_p95", "axis err p95"), ("axis_deg_geometric_median", "geometric axis err median"),
-            ("mean_median", "in-to-surface mean / diag"), ("p95_median", "p95 / diag"),
-            ("noise_floor_median", "noise floor mean / diag"), ("mean_over_floor_median", "mean / floor"),
+            ("mean_median", "in-to-surface mean / diag (median)"), ("mean_mean", "(mean over clouds)"),
+            ("p95_median", "p95 / diag"),
+            ("noise_floor_median", "noise floor: true surface's mean / diag"),
+            ("analytic_floor_median", "analytic floor sigma sqrt(2/pi) / diag"),
+            ("floor_over_analytic_median", "floor / analytic"),
+            ("mean_over_floor_median", "mean / floor"),
             ("truth_to_fit_median", "truth-to-fit mean / diag"), ("seconds_median", "s / cloud"),
             ("projections_median", "projections")]
-    notes = (f"{args.count} clouds per kind (the issue asks for 500), {args.points} points, noise "
-             f"{args.noise:.3%} of the diagonal per coordinate, {args.threads} threads on a shared, "
-             "contended 2-core machine (seconds are inflated; projections is the load-free count). "
-             "The input-to-surface mean cannot go below the noise floor (the true surface's own mean).")
-    write_results("shapes", rows, cols, meta={"count": args.count, "noise": args.noise, "points": args.points,
-                                              "per_cloud": raw},
+    done = min(r["count"] for r in rows)
+    notes = (f"{done} clouds per kind (the issue asks for 500), {args.points} points, noise "
+             f"{args.noise:.3%} of the diagonal per coordinate, init {args.init}, {args.threads} threads on a "
+             "shared, contended 2-core machine (seconds are inflated; projections is the load-free count). "
+             "The input-to-surface mean cannot go below the noise floor (the true surface's own mean, which "
+             "matches the analytic sigma sqrt(2/pi)); truth-to-fit measures the surface itself.")
+    write_results("shapes", rows, cols, meta={"count": done, "noise": args.noise, "points": args.points,
+                                              "init": args.init, "per_cloud": raw},
                   title="Shapes: revolution and extrusion, geometric path", notes=notes)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--count", type=int, default=100)
+    ap.add_argument("--noise", type=float, default=0.005)
+    ap.add_argument("--points", type=int, default=2000)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--init", choices=("geometric", "network"), default="geometric")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    one("revolution", 9999, args.noise, args.points, args.init)  # warm-up (imports, first projection)
+    raw = []
+    for i in range(args.count):
+        for kind in ("revolution", "extrusion"):
+            raw.append(one(kind, 10_000 + i, args.noise, args.points, args.init))
+            print(kind, i, {k: round(v, 5) for k, v in raw[-1].items() if isinstance(v, float)}, flush=True)
+        if (i + 1) % 10 == 0 or i + 1 == args.count:
+            summarise(raw, args)
 
 
 if __name__ == "__main__":

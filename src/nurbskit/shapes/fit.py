@@ -123,8 +123,9 @@ def _perpendicular(a: Tensor, reference: Tensor | None = None) -> Tensor:
 
 
 def _distances(surface, points, params=None):
-    proj = project_points(surface, points, params=params, restart=params is None, grid=48)
-    return proj
+    # the default grid (4 samples per control point and direction): a coarse grid starts
+    # Newton in the wrong basin near a wiggly profile and overstates the distance
+    return project_points(surface, points, params=params, restart=params is None)
 
 
 def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
@@ -132,9 +133,15 @@ def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
     return float(d.mean()), float(np.percentile(d, 95))
 
 
-REFINE_POINTS = 800
+REFINE_POINTS = 2000
 """The refinement runs on at most this many points (a fixed-seed subset): the unknowns
 number a few dozen, and the projection's cost grows with the points."""
+
+
+RESTART_EVERY = 4
+DIRECTION_NEIGHBOURS = 64
+"""Neighbours of the PCA normals that estimate an extrusion's direction."""
+"""The refinement's projections restart from the grid every this many evaluations."""
 
 
 def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
@@ -150,8 +157,12 @@ def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
     def closure():
         opt.zero_grad()
         surface = build()
-        proj = project_points(surface, points, params=state["uv"], grid=48, iterations=16,
-                              restart=state["uv"] is None, check_every=4)
+        # warm start from the last foot points, and a restart from the grid every few
+        # evaluations: a foot point stuck in a wrong basin biases the gradient (the axis
+        # tilts to meet it)
+        restart = state["evals"] % RESTART_EVERY == 0
+        proj = project_points(surface, points, params=state["uv"], iterations=16,
+                              restart=restart, check_every=4)
         state["uv"] = proj.params
         state["evals"] += 1
         loss = (proj.distance ** 2).mean() / scale
@@ -283,7 +294,9 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
     _check_not_plane(p, "extrusion")
     guess = network_guess(p, "extrusion") if init == "network" else None
     if guess is None:
-        n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
+        # wide neighbourhoods: the direction only needs the normals to lie in the section's
+        # plane, which stays true across a bend or a corner, and their noise falls as 1 / k
+        n = estimate_normals(p, max(k, DIRECTION_NEIGHBOURS)) if normals is None else torch.as_tensor(normals, dtype=F64)
         d, _ = extrusion_direction(n)
         c = p.mean(0)
     else:

@@ -12,8 +12,11 @@
    and a small second-difference penalty (keeps sparse spans well posed); then parameter
    correction: each point's parameter is replaced by its foot point on the fitted curve
    (:func:`nurbskit.core.project.project_points_curve`) and the fit repeated. The number of
-   control points is the smallest of a ladder whose mean residual is within 15 % of the
-   best rung's (the best is the noise floor; more control points only chase noise).
+   control points is the rung of a ladder with the smallest Bayesian information
+   criterion ``N log(mean squared residual) + 2 n log N`` (G. Schwarz, 1978), among the
+   rungs whose knot spans are at least ``BAND_SPANS`` times the RMS residual: on noisy
+   points, shorter spans let the curve zig-zag through the noise band (the residual then
+   falls below the noise, and the refinement tilts the axis to feed the zig-zags).
 
 Convention: points ``(N, 2)`` float64; parameters in [0, 1]. Closed profiles (a tube's
 circle) are fitted open: the ends meet up to the thinning cell size.
@@ -37,6 +40,8 @@ Tensor = torch.Tensor
 __all__ = ["order_points", "fit_curve_lsq", "fit_profile", "ProfileFit"]
 
 LADDER = (6, 8, 11, 15, 20, 26, 34)
+BAND_SPANS = 6.0
+"""A rung is refused when its knot spans are shorter than this many times the RMS residual."""
 
 
 def order_points(xy, cells: int = 160) -> np.ndarray:
@@ -153,8 +158,18 @@ def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2) -> Pro
             u = project_points_curve(curve, x, params=u, restart=True).params
             curve = fit_curve_lsq(x, u, n, degree, knots=curve.knot_vector)
         dist = project_points_curve(curve, x, params=u).distance
-        fits.append(ProfileFit(curve, u, float(dist.mean())))
+        msq = float((dist ** 2).mean())
+        # knot spans shorter than a few times the noise band's width let the curve zig-zag
+        # through the noise (its residual then falls below the noise): stop the ladder there
+        length = float(curve.evaluate(torch.linspace(0, 1, 200, dtype=torch.float64)).diff(dim=0).norm(dim=-1).sum())
+        if fits and length / (n - degree) < BAND_SPANS * msq ** 0.5:
+            break
+        fits.append((ProfileFit(curve, u, float(dist.mean())), msq))
     if not fits:
         raise InputError(f"too few profile points ({x.shape[0]}) for a degree-{degree} curve")
-    best = min(f.residual_mean for f in fits)
-    return next(f for f in fits if f.residual_mean <= 1.15 * best + 1e-15)
+    # Bayesian information criterion (Schwarz 1978): N log(mean squared residual) + k log N
+    # with k = 2 n unknowns: more control points must pay for themselves
+    N = x.shape[0]
+    scale = float((x.amax(0) - x.amin(0)).norm()) ** 2
+    bic = [N * np.log(max(msq / scale, 1e-30)) + 2 * f.curve.control_points.shape[0] * np.log(N) for f, msq in fits]
+    return fits[int(np.argmin(bic))][0]
