@@ -23,7 +23,9 @@ count. The kinds alternate cloud by cloud and the results are rewritten every 10
 clouds, so a run stopped early still leaves a consistent table. Reported: medians (and
 the 95th percentile of the axis error).
 
-Run: ``PYTHONPATH=src python benchmarks/bench_shapes.py [--count 100] [--noise 0.005]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_shapes.py [--count 100] [--noise 0.005]``;
+split over processes with ``--start I --count K --name shapes_partJ`` and combine with
+``--merge benchmarks/results/shapes_part*.json --name shapes``.
 The issue asks for 500 clouds per kind; the committed run used fewer (see the results'
 ``count``), because the machine is shared.
 """
@@ -119,7 +121,7 @@ def summarise(raw: list, args) -> None:
              "shared, contended 2-core machine (seconds are inflated; projections is the load-free count). "
              "The input-to-surface mean cannot go below the noise floor (the true surface's own mean, which "
              "matches the analytic sigma sqrt(2/pi)); truth-to-fit measures the surface itself.")
-    write_results("shapes", rows, cols, meta={"count": done, "noise": args.noise, "points": args.points,
+    write_results(args.name, rows, cols, meta={"count": done, "noise": args.noise, "points": args.points,
                                               "init": args.init, "per_cloud": raw},
                   title="Shapes: revolution and extrusion, geometric path", notes=notes)
 
@@ -131,15 +133,30 @@ def main(argv=None) -> None:
     ap.add_argument("--points", type=int, default=2000)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--init", choices=("geometric", "network"), default="geometric")
+    ap.add_argument("--start", type=int, default=0, help="first cloud index (to split a run over processes)")
+    ap.add_argument("--name", default="shapes", help="results name (benchmarks/results/NAME.json/.md)")
+    ap.add_argument("--merge", nargs="+", metavar="JSON", default=None,
+                    help="summarise the per-cloud results of these result files into --name and exit")
     args = ap.parse_args(argv)
+    if args.merge:
+        import json
+
+        raw, seen = [], set()
+        for path in args.merge:
+            for x in json.loads(Path(path).read_text())["meta"]["per_cloud"]:
+                if (x["kind"], x["seed"]) not in seen:
+                    seen.add((x["kind"], x["seed"]))
+                    raw.append(x)
+        summarise(raw, args)
+        return
     torch.set_num_threads(args.threads)
     one("revolution", 9999, args.noise, args.points, args.init)  # warm-up (imports, first projection)
     raw = []
-    for i in range(args.count):
+    for i in range(args.start, args.start + args.count):
         for kind in ("revolution", "extrusion"):
             raw.append(one(kind, 10_000 + i, args.noise, args.points, args.init))
             print(kind, i, {k: round(v, 5) for k, v in raw[-1].items() if isinstance(v, float)}, flush=True)
-        if (i + 1) % 10 == 0 or i + 1 == args.count:
+        if (i + 1 - args.start) % 10 == 0 or i + 1 - args.start == args.count:
             summarise(raw, args)
 
 

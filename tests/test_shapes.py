@@ -166,9 +166,9 @@ def test_bad_kind_and_too_few_points():
 def test_docstring_examples():
     import doctest
 
-    from nurbskit.shapes import axis, fit, normals
+    from nurbskit.shapes import axis, fit, image, init, normals
 
-    for module in (axis, normals, fit):
+    for module in (axis, normals, fit, init, image):
         assert doctest.testmod(module, raise_on_error=False).failed == 0, module.__name__
 
 

@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.batch_command",
     "nurbskit.cli.shape_command",
     "nurbskit.cli.curves_command",
+    "nurbskit.cli.revolve_image_command",
 )
 
 EXIT_BUG = 1

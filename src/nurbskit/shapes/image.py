@@ -9,9 +9,9 @@ the geometric path here reads it off the silhouette directly:
    both work), the object the largest connected component of the other class, its holes
    filled (scipy.ndimage).
 2. **Edges, sub-pixel**: on each pixel row the object spans, the leftmost and rightmost
-   crossings of the grey level through Otsu's threshold, linearly interpolated between
-   pixel centres (an anti-aliased edge's coverage is linear in its position, so the
-   crossing of the 50 % level is the edge).
+   edges placed by area: an anti-aliased edge pixel's grey mixes the object's and the
+   background's (median) greys in proportion to its coverage, so the sum of background
+   fractions over a few pixels across the edge is its distance from the window's end.
 3. **Axis**: ``axis="vertical"``: the vertical line that best mirrors the silhouette,
    ``x = c`` minimising ``sum_rows (x_left + x_right - 2 c)^2``, i.e. the mean of the
    row midpoints; ``axis="principal"``: the image is first turned (scikit-image
@@ -63,7 +63,8 @@ class ImageRevolution:
     distance to the axis (pixels), ``symmetry_max`` the largest; ``profile_residual``:
     mean distance of the (r, z) pairs to the profile (pixels); ``background``: 'light'
     or 'dark'; ``rotation``: degrees the image was turned (``principal``); ``mask``: the
-    silhouette ``(H, W)`` bool of the (turned) image; ``grey``: that image.
+    silhouette ``(H, W)`` bool of the (turned) image; ``grey``: that image; ``levels``:
+    the object's and the background's grey.
     """
 
     surface: NURBSSurface
@@ -75,7 +76,7 @@ class ImageRevolution:
     symmetry_max: float
     profile_residual: float
     background: str
-    threshold: float
+    levels: tuple
     rotation: float
     pixel_size: float
     mask: np.ndarray
@@ -85,7 +86,8 @@ class ImageRevolution:
 
 
 def silhouette(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, float, str]:
-    """``(mask (H, W) bool, threshold, background)`` of a grey image in [0, 1] (step 1)."""
+    """``(mask (H, W) bool, (object grey, background grey), background)`` of a grey image
+    in [0, 1] (step 1); the greys are the two classes' medians."""
     from scipy import ndimage
     from skimage.filters import threshold_otsu
     from skimage.measure import label
@@ -106,27 +108,32 @@ def silhouette(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, flo
     mask = ndimage.binary_fill_holes(labels == int(counts.argmax()))
     if mask.sum() < 4 * MIN_ROWS:
         raise InputError(f"{source}: the object is too small ({int(mask.sum())} pixels) to read a profile from")
-    return mask, t, background
+    # the two greys an anti-aliased edge pixel mixes in proportion to its coverage
+    levels = (float(np.median(grey[mask])), float(np.median(grey[~fg])))
+    return mask, levels, background
 
 
-def _edges(grey: np.ndarray, mask: np.ndarray, t: float, background: str) -> np.ndarray:
-    """Per row of the mask: ``(y_centre, x_left, x_right)``, sub-pixel (step 2)."""
-    g = grey if background == "light" else 1.0 - grey
-    level = t if background == "light" else 1.0 - t
+def _edges(grey: np.ndarray, mask: np.ndarray, levels: tuple[float, float], window: int = 2) -> np.ndarray:
+    """Per row of the mask: ``(y_centre, x_left, x_right)``, sub-pixel (step 2).
+
+    ``levels``: the object's and the background's grey. Each edge is placed by area:
+    over ``window`` pixels on each side of the first (last) object pixel, the sum of the
+    pixels' background fractions ``(g - g_object) / (g_background - g_object)`` (clipped to
+    [0, 1]) is the distance from the window's outer end to the edge; exact for an edge
+    anti-aliased by area coverage, and the centre of the blur for a soft edge.
+    """
+    g_obj, g_bg = levels
+    frac = np.clip((grey - g_obj) / (g_bg - g_obj), 0.0, 1.0)
+    H, W = grey.shape
     rows = []
-    W = grey.shape[1]
     for i in np.flatnonzero(mask.any(1)):
         cols = np.flatnonzero(mask[i])
         a, b = int(cols[0]), int(cols[-1])
-        # the object is darker than `level` in g; the crossing between the last background
-        # centre and the first object centre, by linear interpolation of the grey
-        def cross(c_out: int, c_in: int) -> float:
-            if not 0 <= c_out < W:
-                return c_in + 0.5 + (c_out - c_in) * 0.5  # the image border: the pixel's edge
-            go, gi = g[i, c_out], g[i, c_in]
-            f = 0.5 if go == gi else float(np.clip((go - level) / (go - gi), 0.0, 1.0))
-            return c_out + 0.5 + f * (c_in - c_out)
-        rows.append((i + 0.5, cross(a - 1, a), cross(b + 1, b)))
+        lo, hi = max(a - window, 0), min(a + window, W)  # pixels lo .. hi - 1
+        left = lo + float(frac[i, lo:hi].sum())
+        lo, hi = max(b - window + 1, 0), min(b + window + 1, W)
+        right = hi - float(frac[i, lo:hi].sum())
+        rows.append((i + 0.5, left, right))
     return np.asarray(rows, dtype=np.float64).reshape(-1, 3)
 
 
@@ -189,7 +196,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         source = source or "image"
         grey = to_grey(image, source)
     H, W = grey.shape
-    mask, t, background = silhouette(grey, source)
+    mask, levels, background = silhouette(grey, source)
     rotation = 0.0
     if axis == "principal":
         from skimage.transform import rotate
@@ -197,10 +204,9 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         rotation = _principal_angle(mask)
         if abs(rotation) > 1e-9:
             fill = 1.0 if background == "light" else 0.0
-            cy, cx = (np.array(np.nonzero(mask)).mean(1))
             grey = rotate(grey, rotation, resize=True, center=None, order=1, mode="constant", cval=fill)
-            mask, t, background = silhouette(grey, source)
-    rows = _edges(grey, mask, t, background)
+            mask, levels, background = silhouette(grey, source)
+    rows = _edges(grey, mask, levels)
     if rows.shape[0] < MIN_ROWS:
         raise InputError(f"{source}: the silhouette spans {rows.shape[0]} rows; at least {MIN_ROWS} are needed")
     mid = 0.5 * (rows[:, 1] + rows[:, 2])
@@ -234,7 +240,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
     return ImageRevolution(
         surface=surface, profile=curve, axis={"point": point.tolist(), "direction": direction.tolist()},
         rows=rows, points=rz, symmetry_residual=sym_rms, symmetry_max=sym_max,
-        profile_residual=prof.residual_mean, background=background, threshold=t, rotation=rotation,
+        profile_residual=prof.residual_mean, background=background, levels=levels, rotation=rotation,
         pixel_size=pixel_size, mask=mask, grey=grey, axis_x=c, z_origin=z0,
     )
 
