@@ -183,3 +183,35 @@ def test_real_cylinder_mesh(shared_data):
     assert fit.kind == "revolution", fit.reason
     assert axis_angle_degrees(fit.axis["direction"], [0.0, 1.0, 0.0]) < 0.5
     assert fit.distance_mean < 2e-3  # the caps' sharp rims are rounded by the cubic profile
+
+
+@pytest.mark.parametrize("shape", ["torus", "ellipse", "square"])
+def test_closed_profiles_round_trip(shape):
+    """A torus (a revolved circle) and closed extruded sections: the profile is detected
+    as closed, fitted with its ends tied, and the surface matches the truth."""
+    from nurbskit.shapes.synthetic import torus_cloud, tube_cloud
+
+    if shape == "torus":
+        c, kind = torus_cloud(800, 0.0, 1), "revolution"
+    else:
+        c, kind = tube_cloud(800, 0.0, 2, section=shape), "extrusion"
+    fit = fit_shape(c.points, kind, iterations=10)
+    assert fit.closed
+    P = fit.profile.control_points
+    assert torch.equal(P[0], P[-1]) and float(fit.profile.weights[0]) == float(fit.profile.weights[-1])
+    assert axis_angle_degrees(fit.axis["direction"], c.axis_direction) < 0.1
+    truth = c.surface.sample((30, 30)).reshape(-1, 3)
+    # the square's corners are rounded by the cubic: a looser bound
+    bound = 1e-3 if shape != "square" else 3e-3
+    assert fit.distance_mean < bound and surface_distances(fit.surface, truth)["to_surface_mean"] < bound
+
+
+def test_open_profiles_are_not_closed():
+    from nurbskit.shapes.profile import is_closed, order_points
+
+    t = torch.linspace(0, 1.8 * math.pi, 400, dtype=F64)  # a C: 90 % of a circle
+    xy = torch.stack([t.cos(), t.sin()], -1).numpy()
+    assert not is_closed(xy, order_points(xy))
+    t = torch.linspace(0, 2 * math.pi, 400, dtype=F64)[:-1]
+    xy = torch.stack([t.cos(), 0.5 * t.sin()], -1).numpy()
+    assert is_closed(xy, order_points(xy))

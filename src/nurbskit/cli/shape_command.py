@@ -59,6 +59,7 @@ def _profile_dict(fit) -> dict | None:
         "coordinates": coords,
         "frame": fit.profile_frame,
         "degree": c.degree,
+        "closed": fit.closed,
         "control_points": c.control_points.tolist(),
         "weights": c.weights.tolist(),
         "knot_vector": c.knot_vector.tolist(),

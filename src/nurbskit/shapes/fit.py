@@ -40,7 +40,7 @@ from ..errors import InputError, OptionError
 from .axis import extrusion_direction, revolution_axis
 from .init import INITS, network_guess, plane_basis
 from .normals import estimate_normals
-from .profile import fit_profile
+from .profile import closing_matrix, fit_profile
 
 Tensor = torch.Tensor
 F64 = torch.float64
@@ -83,6 +83,8 @@ class ShapeFit:
     candidates: dict = field(default_factory=dict)
     profile_points: np.ndarray | None = None
     init: str = "geometric"
+    closed: bool = False
+    """The profile closes (a torus, a tube): its last control point is its first."""
     distances: Tensor | None = None
     """Each input point's distance to the surface over the diagonal ``(N,)`` (the error map)."""
 
@@ -198,6 +200,23 @@ def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle):
     return revolve(prof, o, a, angle), e1
 
 
+def _closed(curve: NURBSCurve) -> bool:
+    """A profile closes when its first and last control points (and weights) coincide."""
+    P, w = curve.control_points.detach(), curve.weights.detach()
+    size = float((P.amax(0) - P.amin(0)).norm()) or 1.0
+    return bool(float((P[0] - P[-1]).norm()) <= 1e-9 * size and abs(float(w[0] - w[-1])) <= 1e-12)
+
+
+def _free_profile(curve: NURBSCurve, closed: bool, refine: bool):
+    """``(E, free control points, free log-weights)``: the refined unknowns, and the matrix
+    that expands them to the profile's (a closed profile keeps its last point tied to its first)."""
+    E = closing_matrix(curve.control_points.shape[0], closed)
+    m = E.shape[1]
+    free = curve.control_points.detach()[:m].contiguous().clone().requires_grad_(refine)
+    logw = curve.weights.detach()[:m].log().contiguous().clone().requires_grad_(refine)
+    return E, free, logw
+
+
 def _check_init(init: str) -> None:
     if init not in INITS:
         raise OptionError(f"init must be one of {', '.join(INITS)}, got {init!r}")
@@ -237,34 +256,34 @@ def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int
     e1 = math.cos(start) * e1 + math.sin(start) * e2
     rz = torch.stack([r, z], -1)
     curve = fit_profile(rz.numpy()).curve if guess is None else guess["profile"]
-    ctrl = curve.control_points
+    closed = _closed(curve)
     knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
 
     o_t = o.detach().contiguous().clone().requires_grad_(refine)
     a_t = a.detach().contiguous().clone().requires_grad_(refine)
-    rz_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
-    logw = curve.weights.detach().log().contiguous().clone().requires_grad_(refine)
+    E, rz_free, logw = _free_profile(curve, closed, refine)
 
     def build():
-        s, _ = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        s, _ = _revolution_surface(o_t, a_t, e1, E @ rz_free, torch.exp(E @ logw), knots, degree, angle)
         return s
 
-    evals = _lbfgs([o_t, a_t, rz_t, logw], build, p, iterations) if refine and iterations > 0 else 0
+    evals = _lbfgs([o_t, a_t, rz_free, logw], build, p, iterations) if refine and iterations > 0 else 0
     with torch.no_grad():
         a_f = a_t / a_t.norm()
-        surface, e1_f = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        rz_t = E @ rz_free
+        surface, e1_f = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(E @ logw), knots, degree, angle)
         surface = surface.detach()
         dist = _distances(surface, p).distance
     mean, p95 = _summary(dist, diag)
     # axis point: the foot of the points' centroid, so the report is independent of the start
     o_f = o_t.detach() + ((p.mean(0) - o_t.detach()) @ a_f) * a_f
-    profile = NURBSCurve(rz_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    profile = NURBSCurve(rz_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(E @ logw).detach())
     profile_frame = {"origin": o_t.detach().tolist(), "radial": e1_f.detach().tolist(), "axial": a_f.tolist()}
     return ShapeFit(
         "revolution", surface, {"point": o_f.tolist(), "direction": a_f.tolist()}, profile, profile_frame,
         mean, p95, diag, time.perf_counter() - t0, angle=angle, iterations=evals,
-        profile_points=rz.numpy(), init=init, distances=dist.detach() / diag,
+        profile_points=rz.numpy(), init=init, distances=dist.detach() / diag, closed=closed,
     )
 
 
@@ -307,35 +326,35 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
     xy = torch.stack([rel @ e1, rel @ e2], -1)
     t = rel @ d
     curve = fit_profile(xy.numpy()).curve if guess is None else guess["profile"]
-    ctrl = curve.control_points
+    closed = _closed(curve)
     knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
     t_lo, t_hi = (t.min(), t.max()) if guess is None or guess["extent"] is None else \
         (torch.tensor(guess["extent"][0], dtype=F64), torch.tensor(guess["extent"][1], dtype=F64))
 
     d_t = d.detach().contiguous().clone().requires_grad_(refine)
-    xy_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
-    logw = curve.weights.detach().log().contiguous().clone().requires_grad_(refine)
+    E, xy_free, logw = _free_profile(curve, closed, refine)
     t0 = t_lo.detach().clone().requires_grad_(refine)
     t1 = t_hi.detach().clone().requires_grad_(refine)
 
     def build():
-        s, _, _ = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        s, _, _ = _extrusion_surface(c, d_t, e1, E @ xy_free, torch.exp(E @ logw), knots, degree, t0, t1)
         return s
 
-    evals = _lbfgs([d_t, xy_t, logw, t0, t1], build, p, iterations) if refine and iterations > 0 else 0
+    evals = _lbfgs([d_t, xy_free, logw, t0, t1], build, p, iterations) if refine and iterations > 0 else 0
     with torch.no_grad():
         d_f = d_t / d_t.norm()
-        surface, e1_f, e2_f = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        xy_t = E @ xy_free
+        surface, e1_f, e2_f = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(E @ logw), knots, degree, t0, t1)
         surface = surface.detach()
         dist = _distances(surface, p).distance
     mean, p95 = _summary(dist, diag)
-    profile = NURBSCurve(xy_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    profile = NURBSCurve(xy_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(E @ logw).detach())
     frame = {"origin": c.tolist(), "x": e1_f.tolist(), "y": e2_f.tolist()}
     return ShapeFit(
         "extrusion", surface, {"point": c.tolist(), "direction": d_f.tolist()}, profile, frame,
         mean, p95, diag, time.perf_counter() - t_start, extent=(float(t0.detach()), float(t1.detach())), iterations=evals,
-        profile_points=xy.numpy(), init=init, distances=dist.detach() / diag,
+        profile_points=xy.numpy(), init=init, distances=dist.detach() / diag, closed=closed,
     )
 
 
