@@ -93,7 +93,8 @@ def summarise(raw: list, args) -> None:
         r = [x for x in raw if x["kind"] == kind]
         if not r:
             continue
-        med = {k: statistics.median(x[k] for x in r) for k in r[0] if isinstance(r[0][k], (int, float)) and k != "seed"}
+        keys = {k for x in r for k, v in x.items() if isinstance(v, (int, float)) and k != "seed"}
+        med = {k: statistics.median(x[k] for x in r if k in x) for k in keys}
         rows.append({
             "kind": kind, "count": len(r),
             "axis_deg_median": med["axis_deg"],
