@@ -26,7 +26,7 @@ def test_revolution_end_to_end(tmp_path, capsys):
     assert axis_angle_degrees(rep["axis"]["direction"], c.axis_direction) < 0.5
     assert rep["metrics"]["to_surface_mean"] < 1e-3 and rep["metrics"]["to_surface_p95"] < 3e-3
     assert rep["profile"]["coordinates"] == ["r", "z"] and len(rep["profile"]["control_points"]) >= 4
-    assert sorted(p.name for p in out.iterdir()) == [".nurbskit-manifest.json", "cloud.png", "profile.png", "report.json", "surface.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".nurbskit-manifest.json", "cloud.png", "error_map.png", "profile.png", "report.json", "surface.json"]
     surface = load(out / "surface.json")
     assert surface.degrees[0] == 2 and surface.sizes[0] == 9
     # the file holds the surface the report measured

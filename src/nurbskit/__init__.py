@@ -39,6 +39,7 @@ _LAZY = {
     "fit_silhouettes": ("nurbskit.volume", "fit_silhouettes"),
     "fit_patches": ("nurbskit.patches", "fit_patches"),
     "curves_from_image": ("nurbskit.curves.api", "curves_from_image"),
+    "revolve_image": ("nurbskit.shapes.image", "revolve_image"),
     "io": ("nurbskit.io", None),
     "losses": ("nurbskit.losses", None),
     "metrics": ("nurbskit.metrics", None),

@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "nurbskit.cli.shape_command",
     "nurbskit.cli.curves_command",
     "nurbskit.cli.train_command",
+    "nurbskit.cli.revolve_image_command",
 )
 
 EXIT_BUG = 1

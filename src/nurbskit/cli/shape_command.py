@@ -11,6 +11,8 @@ Writes to ``--out`` (built under a temporary name and moved into place):
 ``cloud.png``         the input with samples of the surface and its control net
 ``profile.png``       the profile in its plane ((r, z) for a revolution) with the
                       points it was fitted to
+``error_map.png``     the input coloured by its distance to the surface (over the
+                      bounding-box diagonal)
 ====================  ==========================================================
 """
 
@@ -38,6 +40,9 @@ def register(subparsers) -> None:
     p.add_argument("input", metavar="INPUT", help="point cloud or mesh file (its vertices are used)")
     p.add_argument("--kind", choices=("revolution", "extrusion", "auto"), default="auto",
                    help="which shape to fit (default auto: by the residual)")
+    p.add_argument("--init", choices=("geometric", "network"), default="geometric",
+                   help="where the refinement starts: the geometric estimate (default) or the trained "
+                        "network's guess (needs the model made by `nurbskit train revolve`)")
     p.add_argument("--iters", type=int, default=30, metavar="N", help="refinement iterations (L-BFGS; default 30)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -54,6 +59,7 @@ def _profile_dict(fit) -> dict | None:
         "coordinates": coords,
         "frame": fit.profile_frame,
         "degree": c.degree,
+        "closed": fit.closed,
         "control_points": c.control_points.tolist(),
         "weights": c.weights.tolist(),
         "knot_vector": c.knot_vector.tolist(),
@@ -65,6 +71,7 @@ def shape_report(fit, metrics: dict) -> dict:
     rep = {
         "kind": fit.kind,
         "reason": fit.reason,
+        "init": fit.init,
         "axis": fit.axis,
         "profile": _profile_dict(fit),
         "metrics": metrics,
@@ -124,7 +131,7 @@ def run_shape(args) -> int:
     points = torch.as_tensor(cloud.points, dtype=torch.float64)
     normals = None if cloud.normals is None else torch.as_tensor(cloud.normals, dtype=torch.float64)
     try:
-        fit = fit_shape(points, args.kind, normals, iterations=args.iters, refine=args.iters > 0)
+        fit = fit_shape(points, args.kind, normals, iterations=args.iters, refine=args.iters > 0, init=args.init)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
     metrics = evaluate_fit(fit.surface, points, (64, 64))
@@ -133,7 +140,7 @@ def run_shape(args) -> int:
     with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         save(fit.surface, tmp / "surface.json")
         if not args.no_figures:
-            from ..viz.plots import plot_clouds
+            from ..viz.plots import plot_clouds, plot_error_map
 
             plot_clouds(points, fit.surface.sample((48, 48)), fit.surface.control_points, tmp / "cloud.png",
                         title=f"{fit.kind}: input, surface and control net")
@@ -141,6 +148,9 @@ def run_shape(args) -> int:
             if fit.profile is not None:
                 _plot_profile(fit, tmp / "profile.png")
                 files.append("profile.png")
+            plot_error_map(points, fit.distances * fit.diagonal, tmp / "error_map.png", scale=fit.diagonal,
+                           title=f"{fit.kind}: distance of each input point to the surface")
+            files.append("error_map.png")
         report["files"] = files
         with atomic_open(tmp / "report.json", "w") as fh:
             json.dump(report, fh, indent=2)

@@ -7,11 +7,12 @@ refinement by point-to-surface distance. See :mod:`.fit` and ``docs/shapes.md``.
 
 from .axis import Axis, axis_angle_degrees, extrusion_direction, revolution_axis
 from .fit import KINDS, ShapeFit, fit_extrusion, fit_revolution, fit_shape
+from .init import INITS, plane_basis
 from .normals import estimate_normals
 from .profile import fit_curve_lsq, fit_profile, order_points
 
 __all__ = [
     "Axis", "axis_angle_degrees", "extrusion_direction", "revolution_axis",
     "KINDS", "ShapeFit", "fit_extrusion", "fit_revolution", "fit_shape",
-    "estimate_normals", "fit_curve_lsq", "fit_profile", "order_points",
+    "INITS", "plane_basis", "estimate_normals", "fit_curve_lsq", "fit_profile", "order_points",
 ]

@@ -38,8 +38,9 @@ from ..core.project import project_points
 from ..core.surface import NURBSSurface
 from ..errors import InputError, OptionError
 from .axis import extrusion_direction, revolution_axis
+from .init import INITS, network_guess, plane_basis
 from .normals import estimate_normals
-from .profile import fit_profile
+from .profile import closing_matrix, fit_profile
 
 Tensor = torch.Tensor
 F64 = torch.float64
@@ -60,7 +61,8 @@ class ShapeFit:
     free-form); ``profile``: the profile curve in its plane, ``(n, 2)`` control points
     ((radius, height) about the axis, or the two in-plane coordinates of an extrusion);
     ``profile_frame``: origin and the two 3-D unit vectors of that plane; ``angle``
-    (revolution) or ``extent`` (extrusion); ``distance_mean`` / ``distance_p95``: point to
+    (revolution) or ``extent`` (extrusion); ``init``: where the fit started ('geometric' or
+    'network'); ``distance_mean`` / ``distance_p95``: point to
     surface over the diagonal; ``seconds``; ``reason``; ``candidates``: the other kinds'
     mean distances (auto).
     """
@@ -80,6 +82,11 @@ class ShapeFit:
     iterations: int = 0
     candidates: dict = field(default_factory=dict)
     profile_points: np.ndarray | None = None
+    init: str = "geometric"
+    closed: bool = False
+    """The profile closes (a torus, a tube): its last control point is its first."""
+    distances: Tensor | None = None
+    """Each input point's distance to the surface over the diagonal ``(N,)`` (the error map)."""
 
 
 def _cloud(points) -> Tensor:
@@ -109,18 +116,18 @@ def _check_not_plane(points: Tensor, kind: str) -> None:
 
 
 def _perpendicular(a: Tensor, reference: Tensor | None = None) -> Tensor:
-    """A unit vector orthogonal to unit ``a``; the projection of ``reference`` when given."""
+    """A unit vector orthogonal to unit ``a``; the projection of ``reference`` when given
+    (else :func:`.init.plane_basis`'s ``e1``, the frame of the network contract)."""
     if reference is None:
-        reference = torch.tensor([1.0, 0.0, 0.0], dtype=a.dtype)
-        if abs(float(a.detach()[0])) > 0.9:
-            reference = torch.tensor([0.0, 1.0, 0.0], dtype=a.dtype)
+        return plane_basis(a)[0]
     e = reference - (reference @ a) * a
     return e / e.norm()
 
 
 def _distances(surface, points, params=None):
-    proj = project_points(surface, points, params=params, restart=params is None, grid=48)
-    return proj
+    # the default grid (4 samples per control point and direction): a coarse grid starts
+    # Newton in the wrong basin near a wiggly profile and overstates the distance
+    return project_points(surface, points, params=params, restart=params is None)
 
 
 def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
@@ -128,9 +135,15 @@ def _summary(distance: Tensor, diag: float) -> tuple[float, float]:
     return float(d.mean()), float(np.percentile(d, 95))
 
 
-REFINE_POINTS = 800
+REFINE_POINTS = 2000
 """The refinement runs on at most this many points (a fixed-seed subset): the unknowns
 number a few dozen, and the projection's cost grows with the points."""
+
+
+RESTART_EVERY = 4
+DIRECTION_NEIGHBOURS = 64
+"""Neighbours of the PCA normals that estimate an extrusion's direction."""
+"""The refinement's projections restart from the grid every this many evaluations."""
 
 
 def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
@@ -146,8 +159,12 @@ def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
     def closure():
         opt.zero_grad()
         surface = build()
-        proj = project_points(surface, points, params=state["uv"], grid=48, iterations=16,
-                              restart=state["uv"] is None, check_every=4)
+        # warm start from the last foot points, and a restart from the grid every few
+        # evaluations: a foot point stuck in a wrong basin biases the gradient (the axis
+        # tilts to meet it)
+        restart = state["evals"] % RESTART_EVERY == 0
+        proj = project_points(surface, points, params=state["uv"], iterations=16,
+                              restart=restart, check_every=4)
         state["uv"] = proj.params
         state["evals"] += 1
         loss = (proj.distance ** 2).mean() / scale
@@ -183,19 +200,49 @@ def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle):
     return revolve(prof, o, a, angle), e1
 
 
-def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
+def _closed(curve: NURBSCurve) -> bool:
+    """A profile closes when its first and last control points (and weights) coincide."""
+    P, w = curve.control_points.detach(), curve.weights.detach()
+    size = float((P.amax(0) - P.amin(0)).norm()) or 1.0
+    return bool(float((P[0] - P[-1]).norm()) <= 1e-9 * size and abs(float(w[0] - w[-1])) <= 1e-12)
+
+
+def _free_profile(curve: NURBSCurve, closed: bool, refine: bool):
+    """``(E, free control points, free log-weights)``: the refined unknowns, and the matrix
+    that expands them to the profile's (a closed profile keeps its last point tied to its first)."""
+    E = closing_matrix(curve.control_points.shape[0], closed)
+    m = E.shape[1]
+    free = curve.control_points.detach()[:m].contiguous().clone().requires_grad_(refine)
+    logw = curve.weights.detach()[:m].log().contiguous().clone().requires_grad_(refine)
+    return E, free, logw
+
+
+def _check_init(init: str) -> None:
+    if init not in INITS:
+        raise OptionError(f"init must be one of {', '.join(INITS)}, got {init!r}")
+
+
+def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24,
+                   init: str = "geometric") -> ShapeFit:
     """Fit an exact surface of revolution to ``points (N, 3)`` (module docstring).
 
     ``normals (N, 3)`` are estimated when None; ``iterations``: L-BFGS iterations of the
-    refinement (0 or ``refine=False``: the geometric estimate alone).
+    refinement (0 or ``refine=False``: the starting estimate alone). ``init``:
+    ``"geometric"`` (line geometry, then the profile fitted to the (r, z) pairs) or
+    ``"network"`` (axis and profile from :func:`nurbskit.shapes.nets.initial_guess`, the
+    contract in :mod:`nurbskit.shapes.init`); the refinement is the same.
     """
+    _check_init(init)
     t0 = time.perf_counter()
     p = _cloud(points)
     _check_not_plane(p, "revolution")
-    n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
-    ax = revolution_axis(p, n)
-    a = ax.direction
-    o = ax.point
+    guess = network_guess(p, "revolution") if init == "network" else None
+    if guess is None:
+        n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
+        ax = revolution_axis(p, n)
+        a, o = ax.direction, ax.point
+    else:
+        a, o = guess["axis_direction"], guess["axis_point"]
     rel = p - o
     z = rel @ a
     radial = rel - z[:, None] * a
@@ -204,37 +251,39 @@ def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int
     e2 = torch.linalg.cross(a, e1, dim=-1)
     phi = torch.atan2(radial @ e2, radial @ e1).numpy()
     start, angle = _angular_extent(phi)
+    if guess is not None and guess["angle"] is not None:
+        angle = guess["angle"]
     e1 = math.cos(start) * e1 + math.sin(start) * e2
     rz = torch.stack([r, z], -1)
-    prof = fit_profile(rz.numpy())
-    ctrl = prof.curve.control_points
-    knots, degree = prof.curve.knot_vector, prof.curve.degree
+    curve = fit_profile(rz.numpy()).curve if guess is None else guess["profile"]
+    closed = _closed(curve)
+    knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
 
     o_t = o.detach().contiguous().clone().requires_grad_(refine)
     a_t = a.detach().contiguous().clone().requires_grad_(refine)
-    rz_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
-    logw = torch.zeros(ctrl.shape[0], dtype=F64, requires_grad=refine)
+    E, rz_free, logw = _free_profile(curve, closed, refine)
 
     def build():
-        s, _ = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        s, _ = _revolution_surface(o_t, a_t, e1, E @ rz_free, torch.exp(E @ logw), knots, degree, angle)
         return s
 
-    evals = _lbfgs([o_t, a_t, rz_t, logw], build, p, iterations) if refine and iterations > 0 else 0
+    evals = _lbfgs([o_t, a_t, rz_free, logw], build, p, iterations) if refine and iterations > 0 else 0
     with torch.no_grad():
         a_f = a_t / a_t.norm()
-        surface, e1_f = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(logw), knots, degree, angle)
+        rz_t = E @ rz_free
+        surface, e1_f = _revolution_surface(o_t, a_t, e1, rz_t, torch.exp(E @ logw), knots, degree, angle)
         surface = surface.detach()
         dist = _distances(surface, p).distance
     mean, p95 = _summary(dist, diag)
     # axis point: the foot of the points' centroid, so the report is independent of the start
     o_f = o_t.detach() + ((p.mean(0) - o_t.detach()) @ a_f) * a_f
-    profile = NURBSCurve(rz_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    profile = NURBSCurve(rz_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(E @ logw).detach())
     profile_frame = {"origin": o_t.detach().tolist(), "radial": e1_f.detach().tolist(), "axial": a_f.tolist()}
     return ShapeFit(
         "revolution", surface, {"point": o_f.tolist(), "direction": a_f.tolist()}, profile, profile_frame,
         mean, p95, diag, time.perf_counter() - t0, angle=angle, iterations=evals,
-        profile_points=rz.numpy(),
+        profile_points=rz.numpy(), init=init, distances=dist.detach() / diag, closed=closed,
     )
 
 
@@ -250,47 +299,62 @@ def _extrusion_surface(c, d, e1, xy, weights, knots, degree, t0, t1):
     return extrude(prof, d, t1 - t0), e1, e2
 
 
-def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24) -> ShapeFit:
-    """Fit an exact extrusion (a general cylinder) to ``points (N, 3)`` (module docstring)."""
+def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24,
+                  init: str = "geometric") -> ShapeFit:
+    """Fit an exact extrusion (a general cylinder) to ``points (N, 3)`` (module docstring).
+
+    Arguments as :func:`fit_revolution`; for ``init="network"`` the guess's
+    ``axis_direction`` is the extrusion direction and its profile lives in the plane
+    through ``axis_point`` with the basis :func:`nurbskit.shapes.init.plane_basis`.
+    """
+    _check_init(init)
     t_start = time.perf_counter()
     p = _cloud(points)
     _check_not_plane(p, "extrusion")
-    n = estimate_normals(p, k) if normals is None else torch.as_tensor(normals, dtype=F64)
-    d, _ = extrusion_direction(n)
-    c = p.mean(0)
+    guess = network_guess(p, "extrusion") if init == "network" else None
+    if guess is None:
+        # wide neighbourhoods: the direction only needs the normals to lie in the section's
+        # plane, which stays true across a bend or a corner, and their noise falls as 1 / k
+        n = estimate_normals(p, max(k, DIRECTION_NEIGHBOURS)) if normals is None else torch.as_tensor(normals, dtype=F64)
+        d, _ = extrusion_direction(n)
+        c = p.mean(0)
+    else:
+        d, c = guess["axis_direction"], guess["axis_point"]
     e1 = _perpendicular(d)
     e2 = torch.linalg.cross(d, e1, dim=-1)
     rel = p - c
     xy = torch.stack([rel @ e1, rel @ e2], -1)
     t = rel @ d
-    prof = fit_profile(xy.numpy())
-    ctrl = prof.curve.control_points
-    knots, degree = prof.curve.knot_vector, prof.curve.degree
+    curve = fit_profile(xy.numpy()).curve if guess is None else guess["profile"]
+    closed = _closed(curve)
+    knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
+    t_lo, t_hi = (t.min(), t.max()) if guess is None or guess["extent"] is None else \
+        (torch.tensor(guess["extent"][0], dtype=F64), torch.tensor(guess["extent"][1], dtype=F64))
 
     d_t = d.detach().contiguous().clone().requires_grad_(refine)
-    xy_t = ctrl.detach().contiguous().clone().requires_grad_(refine)
-    logw = torch.zeros(ctrl.shape[0], dtype=F64, requires_grad=refine)
-    t0 = t.min().detach().clone().requires_grad_(refine)
-    t1 = t.max().detach().clone().requires_grad_(refine)
+    E, xy_free, logw = _free_profile(curve, closed, refine)
+    t0 = t_lo.detach().clone().requires_grad_(refine)
+    t1 = t_hi.detach().clone().requires_grad_(refine)
 
     def build():
-        s, _, _ = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        s, _, _ = _extrusion_surface(c, d_t, e1, E @ xy_free, torch.exp(E @ logw), knots, degree, t0, t1)
         return s
 
-    evals = _lbfgs([d_t, xy_t, logw, t0, t1], build, p, iterations) if refine and iterations > 0 else 0
+    evals = _lbfgs([d_t, xy_free, logw, t0, t1], build, p, iterations) if refine and iterations > 0 else 0
     with torch.no_grad():
         d_f = d_t / d_t.norm()
-        surface, e1_f, e2_f = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(logw), knots, degree, t0, t1)
+        xy_t = E @ xy_free
+        surface, e1_f, e2_f = _extrusion_surface(c, d_t, e1, xy_t, torch.exp(E @ logw), knots, degree, t0, t1)
         surface = surface.detach()
         dist = _distances(surface, p).distance
     mean, p95 = _summary(dist, diag)
-    profile = NURBSCurve(xy_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(logw).detach())
+    profile = NURBSCurve(xy_t.detach().clone(), degree=degree, knot_vector=knots, weights=torch.exp(E @ logw).detach())
     frame = {"origin": c.tolist(), "x": e1_f.tolist(), "y": e2_f.tolist()}
     return ShapeFit(
         "extrusion", surface, {"point": c.tolist(), "direction": d_f.tolist()}, profile, frame,
         mean, p95, diag, time.perf_counter() - t_start, extent=(float(t0.detach()), float(t1.detach())), iterations=evals,
-        profile_points=xy.numpy(),
+        profile_points=xy.numpy(), init=init, distances=dist.detach() / diag, closed=closed,
     )
 
 
@@ -303,13 +367,14 @@ def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> Shape
     result = fit_surface(p, "default")
     surface = result.surface.detach().to(F64)
     diag = float((p.amax(0) - p.amin(0)).norm())
-    mean, p95 = _summary(_distances(surface, p).distance, diag)
+    dist = _distances(surface, p).distance.detach()
+    mean, p95 = _summary(dist, diag)
     return ShapeFit("freeform", surface, None, None, None, mean, p95, diag, time.perf_counter() - t_start,
-                    reason=reason, candidates=candidates)
+                    reason=reason, candidates=candidates, distances=dist / diag)
 
 
 def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, iterations: int = 30,
-              auto_tolerance: float = 5e-3, freeform: bool = True) -> ShapeFit:
+              auto_tolerance: float = 5e-3, freeform: bool = True, init: str = "geometric") -> ShapeFit:
     """Fit a surface of revolution, an extrusion, or (``auto``) the better of the two.
 
     Args:
@@ -317,6 +382,8 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
         kind: 'revolution', 'extrusion' or 'auto'.
         normals: ``(N, 3)`` or None (estimated).
         refine, iterations: the refinement (see :func:`fit_revolution`).
+        init: ``"geometric"`` or ``"network"`` (the trained initialiser of
+            :mod:`nurbskit.shapes.nets`; contract in :mod:`nurbskit.shapes.init`).
         auto_tolerance: ``auto`` accepts an exact shape whose mean point-to-surface distance
             is at most this fraction of the diagonal; otherwise free-form.
         freeform: ``auto`` may fall back to :func:`nurbskit.fit_surface` (else it keeps the
@@ -330,7 +397,8 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
     """
     if kind not in KINDS:
         raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
-    opts = dict(refine=refine, iterations=iterations)
+    _check_init(init)
+    opts = dict(refine=refine, iterations=iterations, init=init)
     if kind == "revolution":
         fit = fit_revolution(points, normals, **opts)
         fit.reason = "asked for a surface of revolution"

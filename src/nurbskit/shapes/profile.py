@@ -12,11 +12,16 @@
    and a small second-difference penalty (keeps sparse spans well posed); then parameter
    correction: each point's parameter is replaced by its foot point on the fitted curve
    (:func:`nurbskit.core.project.project_points_curve`) and the fit repeated. The number of
-   control points is the smallest of a ladder whose mean residual is within 15 % of the
-   best rung's (the best is the noise floor; more control points only chase noise).
+   control points is the rung of a ladder with the smallest Bayesian information
+   criterion ``N log(mean squared residual) + 2 n log N`` (G. Schwarz, 1978), among the
+   rungs whose knot spans are at least ``BAND_SPANS`` times the RMS residual: on noisy
+   points, shorter spans let the curve zig-zag through the noise band (the residual then
+   falls below the noise, and the refinement tilts the axis to feed the zig-zags).
 
-Convention: points ``(N, 2)`` float64; parameters in [0, 1]. Closed profiles (a tube's
-circle) are fitted open: the ends meet up to the thinning cell size.
+Convention: points ``(N, 2)`` float64; parameters in [0, 1]. Closed profiles (a torus's
+circle, a tube's section) are detected when the ordering's two ends meet
+(:func:`is_closed`) and fitted as clamped curves whose last control point is tied to the
+first: closed exactly, C0 at the seam (the seam's second difference is penalised).
 """
 
 from __future__ import annotations
@@ -34,9 +39,11 @@ from ..errors import InputError
 
 Tensor = torch.Tensor
 
-__all__ = ["order_points", "fit_curve_lsq", "fit_profile", "ProfileFit"]
+__all__ = ["order_points", "fit_curve_lsq", "fit_profile", "ProfileFit", "is_closed", "closing_matrix"]
 
 LADDER = (6, 8, 11, 15, 20, 26, 34)
+BAND_SPANS = 6.0
+"""A rung is refused when its knot spans are shorter than this many times the RMS residual."""
 
 
 def order_points(xy, cells: int = 160) -> np.ndarray:
@@ -112,22 +119,42 @@ def _quantile_knots(u: Tensor, n_ctrl: int, degree: int) -> Tensor:
     return torch.cat([zeros, inner, ones])
 
 
+def closing_matrix(n_ctrl: int, closed: bool) -> Tensor:
+    """``E (n_ctrl, m)``: control points ``E @ free``; for a closed curve ``m = n_ctrl - 1``
+    and the last control point is the first (a clamped curve whose ends meet)."""
+    E = torch.eye(n_ctrl, dtype=torch.float64)
+    if not closed:
+        return E
+    E = E[:, :-1].clone()
+    E[-1, 0] = 1.0
+    return E
+
+
 def fit_curve_lsq(points, params, n_ctrl: int, degree: int = 3, *, knots: Tensor | None = None,
-                  smoothing: float = 1e-6) -> NURBSCurve:
+                  smoothing: float = 1e-6, closed: bool = False) -> NURBSCurve:
     """Least-squares B-spline ``NURBSCurve`` through ``points (N, D)`` at ``params (N,)`` in [0, 1].
 
     ``knots`` default to parameter quantiles; ``smoothing`` weighs the second differences of
-    the control points relative to the data term's scale.
+    the control points relative to the data term's scale. ``closed``: the last control
+    point is tied to the first (the curve closes, C0 at the seam; the second difference
+    across the seam is penalised too).
     """
     x = torch.as_tensor(points, dtype=torch.float64)
     u = torch.as_tensor(params, dtype=torch.float64).clamp(0, 1)
     kv = _quantile_knots(u, n_ctrl, degree) if knots is None else knots
-    B = basis_matrix(kv, degree, n_ctrl, u)  # (N, n)
+    E = closing_matrix(n_ctrl, closed)
+    B = basis_matrix(kv, degree, n_ctrl, u) @ E  # (N, m)
     D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0)
+    if closed:  # P[n-2] - 2 P[0] + P[1] across the seam (P[n-1] = P[0])
+        wrap = torch.zeros(1, n_ctrl, dtype=torch.float64)
+        wrap[0, n_ctrl - 2], wrap[0, 0], wrap[0, 1] = 1.0, -2.0, 1.0
+        D = torch.cat([D, wrap])
+    D = D @ E
     BtB = B.T @ B
     lam = smoothing * float(BtB.diagonal().mean())
-    ctrl = torch.linalg.solve(BtB + lam * D.T @ D + 1e-12 * torch.eye(n_ctrl, dtype=torch.float64), B.T @ x)
-    return NURBSCurve(ctrl, degree=degree, knot_vector=kv)
+    m = E.shape[1]
+    free = torch.linalg.solve(BtB + lam * D.T @ D + 1e-12 * torch.eye(m, dtype=torch.float64), B.T @ x)
+    return NURBSCurve(E @ free, degree=degree, knot_vector=kv)
 
 
 class ProfileFit(NamedTuple):
@@ -137,24 +164,59 @@ class ProfileFit(NamedTuple):
     """Each point's parameter on it ``(N,)``."""
     residual_mean: float
     """Mean distance of the points to the curve (after parameter correction)."""
+    closed: bool = False
+    """The curve closes (its last control point is its first)."""
 
 
-def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2) -> ProfileFit:
-    """Order ``xy (N, 2)`` and fit the profile curve (module docstring)."""
+CLOSED_GAP = 0.08
+"""A profile whose ordered ends lie closer than this fraction of its extent is closed."""
+
+
+def is_closed(xy, params) -> bool:
+    """Whether the ordered points ``xy (N, 2)`` (parameters ``(N,)`` from :func:`order_points`)
+    sample a closed curve: the ends of the ordering meet, up to ``CLOSED_GAP`` of the
+    extent, and the curve is long enough to go round (more than twice the extent)."""
+    x = np.asarray(xy, dtype=np.float64)
+    u = np.asarray(params, dtype=np.float64)
+    ext = float(np.linalg.norm(x.max(0) - x.min(0)))
+    order = np.argsort(u)
+    lo, hi = x[order[0]], x[order[-1]]
+    length = float(np.linalg.norm(np.diff(x[order][:: max(1, x.shape[0] // 200)], axis=0), axis=1).sum())
+    return bool(np.linalg.norm(hi - lo) < CLOSED_GAP * ext and length > 2 * ext)
+
+
+def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2, closed: bool | None = None) -> ProfileFit:
+    """Order ``xy (N, 2)`` and fit the profile curve (module docstring).
+
+    ``closed``: fit a closed curve (True), an open one (False), or decide by
+    :func:`is_closed` (None).
+    """
     x = torch.as_tensor(np.asarray(xy), dtype=torch.float64)
     u0 = torch.as_tensor(order_points(x.numpy()), dtype=torch.float64)
+    if closed is None:
+        closed = is_closed(x.numpy(), u0.numpy())
     fits = []
     for n in ladder:
         if n > max(degree + 1, x.shape[0] // 4):
             break
         u = u0
-        curve = fit_curve_lsq(x, u, n, degree)
+        curve = fit_curve_lsq(x, u, n, degree, closed=closed)
         for _ in range(corrections):
             u = project_points_curve(curve, x, params=u, restart=True).params
-            curve = fit_curve_lsq(x, u, n, degree, knots=curve.knot_vector)
+            curve = fit_curve_lsq(x, u, n, degree, knots=curve.knot_vector, closed=closed)
         dist = project_points_curve(curve, x, params=u).distance
-        fits.append(ProfileFit(curve, u, float(dist.mean())))
+        msq = float((dist ** 2).mean())
+        # knot spans shorter than a few times the noise band's width let the curve zig-zag
+        # through the noise (its residual then falls below the noise): stop the ladder there
+        length = float(curve.evaluate(torch.linspace(0, 1, 200, dtype=torch.float64)).diff(dim=0).norm(dim=-1).sum())
+        if fits and length / (n - degree) < BAND_SPANS * msq ** 0.5:
+            break
+        fits.append((ProfileFit(curve, u, float(dist.mean()), closed), msq))
     if not fits:
         raise InputError(f"too few profile points ({x.shape[0]}) for a degree-{degree} curve")
-    best = min(f.residual_mean for f in fits)
-    return next(f for f in fits if f.residual_mean <= 1.15 * best + 1e-15)
+    # Bayesian information criterion (Schwarz 1978): N log(mean squared residual) + k log N
+    # with k = 2 n unknowns: more control points must pay for themselves
+    N = x.shape[0]
+    scale = float((x.amax(0) - x.amin(0)).norm()) ** 2
+    bic = [N * np.log(max(msq / scale, 1e-30)) + 2 * f.curve.control_points.shape[0] * np.log(N) for f, msq in fits]
+    return fits[int(np.argmin(bic))][0]

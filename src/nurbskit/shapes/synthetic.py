@@ -16,7 +16,8 @@ from ..core.curve import NURBSCurve
 
 F64 = torch.float64
 
-__all__ = ["SyntheticCloud", "random_axis", "vase_cloud", "extrusion_cloud", "l_profile"]
+__all__ = ["SyntheticCloud", "random_axis", "vase_cloud", "extrusion_cloud", "l_profile", "torus_cloud",
+           "tube_cloud", "circle_curve"]
 
 
 class SyntheticCloud(NamedTuple):
@@ -84,5 +85,43 @@ def extrusion_cloud(n: int = 2000, noise: float = 0.0, seed: int = 0, kind: str 
         y = 0.4 * torch.rand(m, generator=g, dtype=F64)
         xy, degree, kv = torch.stack([x, y], -1), 3, None
     prof = NURBSCurve(o + xy[:, :1] * e1 + xy[:, 1:2] * e2, degree=degree, knot_vector=kv)
+    s = extrude(prof, d, length)
+    return SyntheticCloud(_sample(s, n, noise, g), s, o, d)
+
+
+def circle_curve(centre, e1, e2, radius: float) -> NURBSCurve:
+    """The exact nine-point rational circle (weights 1 and sqrt(2)/2) of ``radius`` about
+    ``centre (3,)`` in the plane of the unit vectors ``e1, e2``."""
+    sq = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)]
+    P = torch.stack([centre + radius * (a * e1 + b * e2) for a, b in sq])
+    w = torch.tensor([1.0, math.sqrt(0.5)] * 4 + [1.0], dtype=F64)
+    kv = torch.tensor([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1], dtype=F64)
+    return NURBSCurve(P, degree=2, knot_vector=kv, weights=w)
+
+
+def torus_cloud(n: int = 2000, noise: float = 0.0, seed: int = 0, major: float = 1.0,
+                minor: float = 0.35) -> SyntheticCloud:
+    """A torus (a closed profile: a circle revolved) about a random axis; sampled as
+    :func:`vase_cloud`."""
+    g = torch.Generator().manual_seed(seed)
+    o, d = random_axis(g)
+    e1, _ = _frame(d)
+    s = revolve(circle_curve(o + major * e1, e1, d, minor), o, d)
+    return SyntheticCloud(_sample(s, n, noise, g), s, o, d)
+
+
+def tube_cloud(n: int = 2000, noise: float = 0.0, seed: int = 0, side: float = 1.0, length: float = 1.5,
+               section: str = "square") -> SyntheticCloud:
+    """A closed section extruded along a random direction: ``'square'`` (degree 1, the
+    corners as knots) or ``'ellipse'`` (a circle scaled 1 : 0.6, rational quadratic)."""
+    g = torch.Generator().manual_seed(seed)
+    o, d = random_axis(g)
+    e1, e2 = _frame(d)
+    if section == "square":
+        xy = torch.tensor([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=F64) * side
+        kv = torch.tensor([0, 0, 0.25, 0.5, 0.75, 1, 1], dtype=F64)
+        prof = NURBSCurve(o + xy[:, :1] * e1 + xy[:, 1:2] * e2, degree=1, knot_vector=kv)
+    else:
+        prof = circle_curve(o, e1 * side * 0.5, e2 * side * 0.3, 1.0)
     s = extrude(prof, d, length)
     return SyntheticCloud(_sample(s, n, noise, g), s, o, d)
