@@ -42,7 +42,7 @@ from .normals import knn_graph, orient_normals, pca_normals
 from .planar import planar_start, planes_of, relabel_by_size, plane_distances
 from .quadric import moments, taubin_error
 from .queue import MergeQueue
-from .refit import crease_fraction, fit_patch, plane_patch, point_distances, refine_patch
+from .refit import crease_stats, fit_patch, plane_patch, point_distances, refine_patch, surface_normals
 from .trim import trim_patch, trimmed_mesh
 
 Progress = Callable[[str, int, int], None]
@@ -121,6 +121,8 @@ class _Region:
     moments: tuple[np.ndarray, np.ndarray]
     origin: list[int]
     topology: object = None
+    normals: np.ndarray | None = None
+    """``(M,)`` x 3: each member's normal in this region's model (plane or patch)."""
 
     def contribution(self, eps: float) -> Contribution:
         ok = self.distance < eps
@@ -236,7 +238,8 @@ def fit_patches(
     for r in range(len(centers)):
         idx = order[bounds[r] : bounds[r + 1]]
         d = plane_distances(x[idx], np.broadcast_to(centers[r], (len(idx), 3)), np.broadcast_to(plane_normals[r], (len(idx), 3)))
-        regions[r] = _Region(idx, d, None, None, False, moments(xn[idx]), [r])
+        regions[r] = _Region(idx, d, None, None, False, moments(xn[idx]), [r],
+                             normals=np.broadcast_to(plane_normals[r], (len(idx), 3)))
     graph = adjacency(labels0, nb, cfg.min_links)
     queue = MergeQueue()
     priority: dict[tuple[int, int], float] = {}
@@ -264,6 +267,7 @@ def fit_patches(
     history: list[dict] = []
     cache: dict[tuple[int, int], _Region | None] = {}
     rejected: set[tuple[int, int]] = set()
+    crease_log: dict[tuple[int, int], tuple[float, float]] = {}
     counts = {"fits": 0, "candidates": 0, "accepted": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
     next_id = s0
     while True:
@@ -284,15 +288,22 @@ def fit_patches(
             counts["fits"] += pf.fits
             counts["candidates"] += 1
             ok = pf.distance < eps
-            if crease_fraction(pf.surface, pf.params[ok], cfg.min_radius * eps) > cfg.crease_fraction:
+            part_normals = np.concatenate([regions[a].normals, regions[b].normals])
+            tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
+                                         model_normals=part_normals[ok], max_angle=cfg.crease_angle)
+            crease_log[key] = (tight, turned)
+            if tight > cfg.crease_fraction and turned > cfg.crease_turned:
                 cand = None
                 counts["creases"] += 1
             else:
                 (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
                 cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
-                               regions[a].origin + regions[b].origin, pf.topology)
+                               regions[a].origin + regions[b].origin, pf.topology,
+                               surface_normals(pf.surface, pf.params))
             cache[key] = cand
         record = {"a": a, "b": b, "priority": e, "energy_before": u}
+        if key in crease_log:
+            record["tight"], record["turned"] = crease_log[key]
         if cand is None:
             record.update(accepted=False, reason="crease")
             history.append(record)
