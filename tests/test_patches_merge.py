@@ -1,6 +1,7 @@
 """Merging: one cylinder's two halves become one (closed) patch; two perpendicular planes stay two."""
 
 import numpy as np
+import pytest
 
 from nurbskit.patches import PatchConfig, fit_patches
 from nurbskit.patches.energy import Contribution, energy
@@ -79,6 +80,7 @@ def _can(n, rng, noise):
     return p + rng.normal(0, noise * diag / np.sqrt(3), p.shape), diag
 
 
+@pytest.mark.slow
 def test_a_cylinder_with_caps_is_three_patches_and_covers_its_input():
     """The issue's clean CAD case, smaller (3,000 points, 0.1 % noise): a closed side and two flat caps."""
     rng = np.random.default_rng(0)

@@ -45,6 +45,11 @@ class PatchConfig:
     crease_turned: float = _f(
         0.2, "a tight bend is a rounded crease when more than this fraction of it turns by more than crease_angle"
     )
+    crease_seam: float = _f(
+        60.0,
+        "a tight bend is a rounded crease when the two parts meet at more than this many degrees (median angle of their "
+        "normals across the kNN links joining them); planar strips of a fillet meet at less (about 2 x normal_angle)",
+    )
     crease_angle: float = _f(
         40.0,
         "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
@@ -59,6 +64,11 @@ class PatchConfig:
         1.0,
         "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "
         "this many eps^2 (0: never skip); the paper's optional cut, here on by default: it keeps a cap off a tube",
+    )
+    max_points: int = _f(
+        20_000,
+        "larger clouds: the planar start and the merges run on a seeded subset of this many points, and every input "
+        "point is then assigned to a patch by projection (0: never subsample)",
     )
     seed: int = _f(0, "seed of every random subset")
     device: str = _f("cpu", "torch device of the fits: cpu or cuda")
@@ -76,10 +86,10 @@ class PatchConfig:
             raise OptionError(
                 f"max_ctrl: expected degree + 1 = {self.degree + 1} <= min_ctrl ({self.min_ctrl}) <= max_ctrl, got {self.max_ctrl}"
             )
-        for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction", "crease_angle"):
+        for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction", "crease_angle", "crease_seam"):
             if not getattr(self, name) > 0:
                 raise OptionError(f"{name}: expected a positive number, got {getattr(self, name)!r}")
-        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0)):
+        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0), ("max_points", 0)):
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
