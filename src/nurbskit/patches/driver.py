@@ -11,10 +11,15 @@ Flow (one function per step, each in its own module):
    their union (sums of 10 x 10 moment matrices);
 4. **merge and refit** (:mod:`.refit`, :mod:`.energy`): the cheapest pair is fitted with
    one NURBS patch (the project's fitting), its inliers found by true projection, and the
-   merge kept only when the energy U decreases and the patch does not round a sharp crease;
-   a rejected pair is tried again (with its cached fit) when a neighbour of it changes;
+   merge kept only when the energy U decreases and the patch does not round a sharp crease
+   (it bends tighter than ``min_radius`` AND either turns away from its parts' own normals
+   or joins two parts meeting at a steep seam: a fillet cut into planar strips still
+   merges); a rejected pair is tried again (with its cached fit) when a neighbour of it
+   changes;
 5. **finalise**: untouched planar regions become flat patches, outliers join a
-   neighbouring patch they lie within ``eps`` of;
+   neighbouring patch they lie within ``eps`` of; a cloud larger than ``max_points`` ran
+   steps 1-5 on a seeded subset, and now every input point is projected onto the patches
+   of its nearest merged points (5b);
 6. **trim** (:mod:`.trim`): alpha shapes of the inliers in (u, v), trimmed meshes;
 7. **metrics** (:mod:`.metrics`).
 
