@@ -96,3 +96,27 @@ def test_a_cylinder_with_caps_is_three_patches_and_covers_its_input():
     for patch in res.patches:
         if not patch.closed:
             assert np.ptp(p[patch.inliers, 2]) < 2 * 0.01 * diag
+
+
+def test_a_fillet_cut_into_strips_merges_with_its_faces():
+    """Two perpendicular faces joined by a fillet of radius 2.3 eps, given as four planar regions.
+
+    The merged patch bends tighter than ``min_radius`` on the fillet, but it follows its
+    strips' normals and the parts meet at shallow seams, so the crease test lets it merge
+    (the previous rule, a tight bend alone, kept every strip apart).
+    """
+    rng = np.random.default_rng(3)
+    r = 0.04
+    a = rng.random((1500, 2)) * [1 - r, 1]
+    b = rng.random((1500, 2)) * [1 - r, 1]
+    t, y = rng.uniform(0, np.pi / 2, 600), rng.random(600)
+    p = np.vstack([np.c_[r + a[:, 0], a[:, 1], np.zeros(1500)],
+                   np.c_[np.zeros(1500), b[:, 1], r + b[:, 0]],
+                   np.c_[r - r * np.sin(t), y, r - r * np.cos(t)]])
+    labels = np.r_[np.zeros(1500), np.ones(1500), np.where(t < np.pi / 4, 2, 3)].astype(np.int64)
+    res = fit_patches(p, config=PatchConfig(final_iters=0), init_labels=labels)
+    merged = [h for h in res.history if h["accepted"]]
+    assert merged and len(res) < 4
+    # a strip of the fillet now shares a patch with a face
+    assert any(set(patch.regions) & {2, 3} and set(patch.regions) & {0, 1} for patch in res.patches)
+    assert res.metrics["P_cov_i"] > 99

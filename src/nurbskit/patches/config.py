@@ -46,7 +46,7 @@ class PatchConfig:
         0.2, "a tight bend is a rounded crease when more than this fraction of it turns by more than crease_angle"
     )
     crease_seam: float = _f(
-        60.0,
+        75.0,
         "a tight bend is a rounded crease when the two parts meet at more than this many degrees (median angle of their "
         "normals across the kNN links joining them); planar strips of a fillet meet at less (about 2 x normal_angle)",
     )
