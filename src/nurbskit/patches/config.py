@@ -47,7 +47,7 @@ class PatchConfig:
     )
     crease_seam: float = _f(
         75.0,
-        "a tight bend is a rounded crease when the two parts meet at more than this many degrees (median angle of their "
+        "two parts never merge when they meet at more than this many degrees (median angle of their "
         "normals across the kNN links joining them); planar strips of a fillet meet at less (about 2 x normal_angle)",
     )
     crease_angle: float = _f(

@@ -12,9 +12,8 @@ Flow (one function per step, each in its own module):
 4. **merge and refit** (:mod:`.refit`, :mod:`.energy`): the cheapest pair is fitted with
    one NURBS patch (the project's fitting), its inliers found by true projection, and the
    merge kept only when the energy U decreases and the patch does not round a sharp crease
-   (it bends tighter than ``min_radius`` AND either turns away from its parts' own normals
-   or joins two parts meeting at a steep seam: a fillet cut into planar strips still
-   merges); a rejected pair is tried again (with its cached fit) when a neighbour of it
+   (its parts meet at a steep seam, or it bends tighter than ``min_radius`` where it turns
+   away from its parts' own normals: a fillet cut into planar strips still merges); a rejected pair is tried again (with its cached fit) when a neighbour of it
    changes;
 5. **finalise**: untouched planar regions become flat patches, outliers join a
    neighbouring patch they lie within ``eps`` of; a cloud larger than ``max_points`` ran
@@ -324,7 +323,8 @@ def fit_patches(
                                          model_normals=part_normals[ok], max_angle=cfg.crease_angle)
             seam = seam_angle(a, b)
             crease_log[key] = (tight, turned, seam)
-            if tight > cfg.crease_fraction and (turned > cfg.crease_turned or seam > cfg.crease_seam):
+            # parts meeting at a steep seam cannot be one smooth patch, however the fit rounds it
+            if seam > cfg.crease_seam or (tight > cfg.crease_fraction and turned > cfg.crease_turned):
                 cand = None
                 counts["creases"] += 1
             else:
