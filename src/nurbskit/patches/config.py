@@ -55,7 +55,7 @@ class PatchConfig:
         "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
         "normal of the merged part the point came from (a fillet cut into planar strips stays within normal_angle)",
     )
-    fit_points: int = _f(500, "fit each candidate patch on at most this many of its points (seeded subset)")
+    fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
     fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
