@@ -21,6 +21,8 @@ the true surface. There is no peer in ../shared/peers for this method (the paper
 needs CUDA and GoCoPP); the paper's own ABC averages are quoted for reference.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...] [--name RESULTS]``
+(the scale rows ``cylinder_caps_100k`` and ``cylinder_caps_1m`` run only when named, each
+alone: their peak RSS is the process's)
 (``--merge A B`` combines the rows of separate runs into results/patches.*).
 Writes results/patches.json, results/patches.md (after every file) and
 results/patches_figures/*.png.
