@@ -21,6 +21,8 @@ the true surface. There is no peer in ../shared/peers for this method (the paper
 needs CUDA and GoCoPP); the paper's own ABC averages are quoted for reference.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...] [--name RESULTS]``
+(the scale rows ``cylinder_caps_100k`` and ``cylinder_caps_1m`` run only when named, each
+alone: their peak RSS is the process's)
 (``--merge A B`` combines the rows of separate runs into results/patches.*).
 Writes results/patches.json, results/patches.md (after every file) and
 results/patches_figures/*.png.
@@ -29,6 +31,7 @@ results/patches_figures/*.png.
 from __future__ import annotations
 
 import argparse
+import resource
 import sys
 import time
 from pathlib import Path
@@ -84,7 +87,12 @@ def inputs(only):
     items.append(("kinect_test0_20k", "scan", kinect))
     items.append(("bunny", "scan", lambda: (read_points(DATA / "classic_meshes/stanford-bunny.obj").points, None)))
     items.append(("cylinder_caps_10k", "synthetic", lambda: (cylinder_with_caps()[0], None)))
-    return [it for it in items if not only or it[0] in only]
+    # scale rows (run each alone: peak memory is the process's): merges on a 20,000-point
+    # subset, then every point assigned by projection
+    items.append(("cylinder_caps_100k", "scale", lambda: (cylinder_with_caps(100_000)[0], None)))
+    items.append(("cylinder_caps_1m", "scale", lambda: (cylinder_with_caps(1_000_000)[0], None)))
+    default = {name for name, kind, _ in items if kind != "scale"}
+    return [it for it in items if (it[0] in only if only else it[0] in default)]
 
 
 def main(argv=None) -> int:
@@ -123,19 +131,21 @@ def main(argv=None) -> int:
             "seconds": wall, "cpu_seconds": cpu,
             "stages": {k: round(v, 3) for k, v in res.timings.items()}, "counts": res.counts,
             "closed_patches": sum(p.closed for p in res.patches),
+            "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
             "ctrl": [list(p.surface.sizes) for p in res.patches],
         }
         row["P_cov_o_ceiling"] = pcov_o_ceiling(points, cfg.eps * diag)
         if name.startswith("cylinder"):
             from scipy.spatial import cKDTree
 
-            _, true = cylinder_with_caps()
+            _, true = cylinder_with_caps(len(points))
             d, _ = cKDTree(points).query(true)
             row["P_cov_o_ceiling"] = float(100 * np.mean(d < cfg.eps * diag))
             row["within_eps_pct"] = m["P_cov_i"]
         row["P_cov_o_of_ceiling"] = 100 * row["P_cov_o"] / row["P_cov_o_ceiling"]
         s = row["stages"]
         row["merge_s"], row["finalise_s"], row["other_s"] = s["merge"], s["finalise"], sum(s.values()) - s["merge"] - s["finalise"]
+        row["stage_pct"] = {k: round(100 * v / max(sum(s.values()), 1e-9), 1) for k, v in s.items()}
         rows.append(row)
         plot_labels(points, res.labels, figures / f"{name}.png", f"{name}: {m['N']} patches")
         plot_labels(points, res.planar_labels, figures / f"{name}_planar.png", f"{name}: {res.planar['planes']} planes")
@@ -160,7 +170,7 @@ def write_table(rows: list[dict], name: str) -> None:
                ("completeness", "compl. %"), ("P_cov_i", "P_cov^i %"), ("P_cov_o", "P_cov^o %"),
                ("P_cov_o_ceiling", "P_cov^o ceiling %"), ("iou", "IoU %"), ("in_to_out_mean_pct", "in->out mean % diag"),
                ("seconds", "wall s"), ("cpu_seconds", "cpu s"), ("merge_s", "merge s"), ("finalise_s", "finalise s"),
-               ("other_s", "other s")]
+               ("other_s", "other s"), ("peak_rss_gb", "peak RSS GB")]
     notes = ("Defaults (eps 1 % of the diagonal, weights 0.3/0.4/0.3, max 12 x 12). Paper's ABC averages: "
              f"completeness {PAPER_ABC['completeness']} %, P_cov^i {PAPER_ABC['P_cov_i']} %, P_cov^o {PAPER_ABC['P_cov_o']} %, "
              f"|N| {PAPER_ABC['N']}. Wall seconds on a shared 2-core machine (load varies); cpu s is this process's CPU time.")

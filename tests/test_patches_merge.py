@@ -1,6 +1,7 @@
 """Merging: one cylinder's two halves become one (closed) patch; two perpendicular planes stay two."""
 
 import numpy as np
+import pytest
 
 from nurbskit.patches import PatchConfig, fit_patches
 from nurbskit.patches.energy import Contribution, energy
@@ -41,7 +42,7 @@ def test_bend_radius_of_a_cylinder_patch_is_its_radius():
     rng = np.random.default_rng(2)
     p, t = _cylinder(1200, rng, r=0.3)
     half = p[t < np.pi]
-    pf = fit_patch(half, 0.01, Cfg())
+    pf = fit_patch(half, 0.01, Cfg(fit_points=800, fit_rounds=15))  # a converged fit (candidates use fewer rounds)
     r = bend_radii(pf.surface, pf.params[pf.distance < 0.005])
     assert abs(np.median(r) - 0.3) < 0.02
 
@@ -66,3 +67,56 @@ def test_points_across_the_seam_of_a_closed_patch_find_their_foot_point():
     near = s.evaluate(torch.tensor([[0.5, 0.995], [0.3, 0.004]], dtype=torch.float64)).numpy()
     _, d = point_distances(s, near, closed_v=True)
     assert d.max() < 1e-8
+
+
+def _can(n, rng, noise):
+    """A cylinder (radius 0.5, height 1) with both caps, area-uniform, Gaussian noise ``noise`` x diagonal."""
+    r, h = 0.5, 1.0
+    side = rng.random(n) < (2 * np.pi * r * h) / (2 * np.pi * r * h + 2 * np.pi * r * r)
+    t, z, rr = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, h, n), r * np.sqrt(rng.random(n))
+    cap = np.where(rng.random(n) < 0.5, 0.0, h)
+    p = np.where(side[:, None], np.c_[r * np.cos(t), r * np.sin(t), z], np.c_[rr * np.cos(t), rr * np.sin(t), cap])
+    diag = np.sqrt(2 * (2 * r) ** 2 + h * h)
+    return p + rng.normal(0, noise * diag / np.sqrt(3), p.shape), diag
+
+
+@pytest.mark.slow
+def test_a_cylinder_with_caps_is_three_patches_and_covers_its_input():
+    """The issue's clean CAD case, smaller (3,000 points, 0.1 % noise): a closed side and two flat caps."""
+    rng = np.random.default_rng(0)
+    p, diag = _can(3000, rng, 0.001)
+    res = fit_patches(p, config=PatchConfig(final_iters=0))
+    m = res.metrics
+    assert m["N"] == 3  # no more patches than smooth faces: the side is one closed patch
+    assert sum(patch.closed for patch in res.patches) == 1
+    assert m["P_cov_i"] >= 99.9  # input within eps of the trimmed output
+    assert m["input_to_output_mean"] <= 0.0012  # fraction of the diagonal
+    # the crease test keeps each cap off the side: a cap's inliers span at most the cap
+    # plane's eps band plus the side's rim points within eps of it (a merge would span 1)
+    for patch in res.patches:
+        if not patch.closed:
+            assert np.ptp(p[patch.inliers, 2]) < 2 * 0.01 * diag
+
+
+def test_a_fillet_cut_into_strips_merges_with_its_faces():
+    """Two perpendicular faces joined by a fillet of radius 2.3 eps, given as four planar regions.
+
+    The merged patch bends tighter than ``min_radius`` on the fillet, but it follows its
+    strips' normals and the parts meet at shallow seams, so the crease test lets it merge
+    (the previous rule, a tight bend alone, kept every strip apart).
+    """
+    rng = np.random.default_rng(3)
+    r = 0.04
+    a = rng.random((1500, 2)) * [1 - r, 1]
+    b = rng.random((1500, 2)) * [1 - r, 1]
+    t, y = rng.uniform(0, np.pi / 2, 600), rng.random(600)
+    p = np.vstack([np.c_[r + a[:, 0], a[:, 1], np.zeros(1500)],
+                   np.c_[np.zeros(1500), b[:, 1], r + b[:, 0]],
+                   np.c_[r - r * np.sin(t), y, r - r * np.cos(t)]])
+    labels = np.r_[np.zeros(1500), np.ones(1500), np.where(t < np.pi / 4, 2, 3)].astype(np.int64)
+    res = fit_patches(p, config=PatchConfig(final_iters=0), init_labels=labels)
+    merged = [h for h in res.history if h["accepted"]]
+    assert merged and len(res) < 4
+    # a strip of the fillet now shares a patch with a face
+    assert any(set(patch.regions) & {2, 3} and set(patch.regions) & {0, 1} for patch in res.patches)
+    assert res.metrics["P_cov_i"] > 99

@@ -45,6 +45,7 @@ def register(subparsers) -> None:
     p.add_argument("--init", default="auto", metavar="auto|FILE.vg", help=_help("init") + " (default auto)")
     p.add_argument("--sample", type=int, default=None, metavar="N",
                    help="INPUT is a mesh: fit N points sampled uniformly on its area instead of its vertices")
+    p.add_argument("--max-points", type=int, default=20_000, metavar="N", help=_help("max_points") + " (default 20000)")
     p.add_argument("--seed", type=int, default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -123,13 +124,16 @@ def run_patches(args) -> int:
 
     parse_device(args.device)  # the one device parser: a device that exists here, or one line
     cfg = PatchConfig(eps=args.eps, weights=weights, max_ctrl=args.max_ctrl, seed=args.seed, device=args.device,
-                      init=args.init)
+                      init=args.init, max_points=args.max_points)
     try:
         cfg.validate()
     except OptionError as exc:
         raise OptionError(f"--{str(exc).split(':')[0].replace('_', '-')}:{str(exc).split(':', 1)[1]}") from None
     check_output_dir(args.out, args.overwrite, inputs=[args.input])  # refuse a bad --out before the work
     points, normals, labels = load_cloud(args.input, args.sample, args.seed)
+    from ..patches.driver import check_patch_memory
+
+    check_patch_memory(len(points), str(args.input))  # one line naming INPUT and the estimate, before the work
     init_labels = None
     if args.init != "auto":
         vg = Path(args.init)

@@ -42,8 +42,21 @@ class PatchConfig:
         3.0, "a merged patch may not bend tighter than this many eps on more than crease_fraction of its inliers"
     )
     crease_fraction: float = _f(0.01, "fraction of inliers allowed on a tighter bend than min_radius (a sharp crease)")
+    crease_turned: float = _f(
+        0.2, "a tight bend is a rounded crease when more than this fraction of it turns by more than crease_angle"
+    )
+    crease_seam: float = _f(
+        75.0,
+        "two parts never merge when they meet at more than this many degrees (median angle of their "
+        "normals across the kNN links joining them); planar strips of a fillet meet at less (about 2 x normal_angle)",
+    )
+    crease_angle: float = _f(
+        40.0,
+        "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
+        "normal of the merged part the point came from (a fillet cut into planar strips stays within normal_angle)",
+    )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
-    fit_rounds: int = _f(15, "alternating projection + least-squares rounds of each candidate fit")
+    fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
@@ -51,6 +64,11 @@ class PatchConfig:
         1.0,
         "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "
         "this many eps^2 (0: never skip); the paper's optional cut, here on by default: it keeps a cap off a tube",
+    )
+    max_points: int = _f(
+        20_000,
+        "larger clouds: the planar start and the merges run on a seeded subset of this many points, and every input "
+        "point is then assigned to a patch by projection (0: never subsample)",
     )
     seed: int = _f(0, "seed of every random subset")
     device: str = _f("cpu", "torch device of the fits: cpu or cuda")
@@ -68,13 +86,15 @@ class PatchConfig:
             raise OptionError(
                 f"max_ctrl: expected degree + 1 = {self.degree + 1} <= min_ctrl ({self.min_ctrl}) <= max_ctrl, got {self.max_ctrl}"
             )
-        for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction"):
+        for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction", "crease_angle", "crease_seam"):
             if not getattr(self, name) > 0:
                 raise OptionError(f"{name}: expected a positive number, got {getattr(self, name)!r}")
-        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0)):
+        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0), ("max_points", 0)):
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if not 0 <= self.crease_turned < 1:
+            raise OptionError(f"crease_turned: expected a fraction in [0, 1), got {self.crease_turned!r}")
         if self.max_quadric_error < 0:
             raise OptionError(f"max_quadric_error: expected >= 0, got {self.max_quadric_error!r}")
         return self

@@ -11,10 +11,14 @@ Flow (one function per step, each in its own module):
    their union (sums of 10 x 10 moment matrices);
 4. **merge and refit** (:mod:`.refit`, :mod:`.energy`): the cheapest pair is fitted with
    one NURBS patch (the project's fitting), its inliers found by true projection, and the
-   merge kept only when the energy U decreases and the patch does not round a sharp crease;
-   a rejected pair is tried again (with its cached fit) when a neighbour of it changes;
+   merge kept only when the energy U decreases and the patch does not round a sharp crease
+   (its parts meet at a steep seam, or it bends tighter than ``min_radius`` where it turns
+   away from its parts' own normals: a fillet cut into planar strips still merges); a rejected pair is tried again (with its cached fit) when a neighbour of it
+   changes;
 5. **finalise**: untouched planar regions become flat patches, outliers join a
-   neighbouring patch they lie within ``eps`` of;
+   neighbouring patch they lie within ``eps`` of; a cloud larger than ``max_points`` ran
+   steps 1-5 on a seeded subset, and now every input point is projected onto the patches
+   of its nearest merged points (5b);
 6. **trim** (:mod:`.trim`): alpha shapes of the inliers in (u, v), trimmed meshes;
 7. **metrics** (:mod:`.metrics`).
 
@@ -42,7 +46,7 @@ from .normals import knn_graph, orient_normals, pca_normals
 from .planar import planar_start, planes_of, relabel_by_size, plane_distances
 from .quadric import moments, taubin_error
 from .queue import MergeQueue
-from .refit import crease_fraction, fit_patch, plane_patch, point_distances, refine_patch
+from .refit import crease_stats, fit_patch, plane_patch, point_distances, refine_patch, surface_normals
 from .trim import trim_patch, trimmed_mesh
 
 Progress = Callable[[str, int, int], None]
@@ -121,6 +125,8 @@ class _Region:
     moments: tuple[np.ndarray, np.ndarray]
     origin: list[int]
     topology: object = None
+    normals: np.ndarray | None = None
+    """``(M,)`` x 3: each member's normal in this region's model (plane or patch)."""
 
     def contribution(self, eps: float) -> Contribution:
         ok = self.distance < eps
@@ -177,15 +183,23 @@ def fit_patches(
         (1, True)
     """
     cfg = (config or PatchConfig()).validate()
-    x = _check_points(points)
-    n = len(x)
+    full = _check_points(points)
+    check_patch_memory(len(full))
     report = progress or (lambda stage, done, total: None)
     timings: dict[str, float] = {}
-    lo, hi = x.min(0), x.max(0)
+    lo, hi = full.min(0), full.max(0)
     diag = float(np.linalg.norm(hi - lo))
     eps = cfg.eps * diag
-    xn = (x - (lo + hi) / 2) / diag  # for the quadric moments: unit diagonal
     rng = np.random.default_rng(cfg.seed)
+    # Large clouds: the planar start and the merges run on a seeded subset of max_points
+    # (a surface is determined long before 10^5 points); every input point is assigned
+    # by projection onto the final patches at the end (step 5b).
+    subset = None
+    if cfg.max_points and len(full) > cfg.max_points:
+        subset = np.sort(rng.choice(len(full), cfg.max_points, replace=False))
+    x = full if subset is None else full[subset]
+    n = len(x)
+    xn = (x - (lo + hi) / 2) / diag  # for the quadric moments: unit diagonal
 
     # 1. normals
     t = time.perf_counter()
@@ -196,8 +210,9 @@ def fit_patches(
         nrm = orient_normals(x, pca, nb)
     else:
         nrm = np.asarray(normals.detach().cpu().numpy() if isinstance(normals, torch.Tensor) else normals, dtype=np.float64)
-        if nrm.shape != x.shape:
-            raise InputError(f"normals must have the points' shape {x.shape}, got {nrm.shape}")
+        if nrm.shape != full.shape:
+            raise InputError(f"normals must have the points' shape {full.shape}, got {nrm.shape}")
+        nrm = nrm if subset is None else nrm[subset]
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
     report("normals", 1, 1)
     timings["normals"] = time.perf_counter() - t
@@ -211,8 +226,9 @@ def fit_patches(
         labels0 = start.labels
     else:
         labels0 = np.asarray(init_labels, dtype=np.int64)
-        if labels0.shape != (n,):
-            raise InputError(f"the planar start has {labels0.shape[0]} labels for {n} points")
+        if labels0.shape != (len(full),):
+            raise InputError(f"the planar start has {labels0.shape[0]} labels for {len(full)} points")
+        labels0 = labels0 if subset is None else labels0[subset]
         labels0 = relabel_by_size(labels0, 3)
     centers, plane_normals = planes_of(x, labels0)
     inside = labels0 >= 0
@@ -236,8 +252,25 @@ def fit_patches(
     for r in range(len(centers)):
         idx = order[bounds[r] : bounds[r + 1]]
         d = plane_distances(x[idx], np.broadcast_to(centers[r], (len(idx), 3)), np.broadcast_to(plane_normals[r], (len(idx), 3)))
-        regions[r] = _Region(idx, d, None, None, False, moments(xn[idx]), [r])
+        regions[r] = _Region(idx, d, None, None, False, moments(xn[idx]), [r],
+                             normals=np.broadcast_to(plane_normals[r], (len(idx), 3)))
     graph = adjacency(labels0, nb, cfg.min_links)
+    # per point: its current region and its normal in that region's model (the crease test)
+    current = labels0.copy()
+    model_normal = np.zeros((n, 3))
+    for r, reg in regions.items():
+        model_normal[reg.members] = reg.normals
+
+    def seam_angle(a: int, b: int) -> float:
+        """Median angle (degrees) between a's and b's model normals across the kNN links joining them."""
+        ia = regions[a].members
+        hit = current[nb[ia]] == b
+        if not hit.any():
+            return 0.0
+        i = np.repeat(ia, hit.sum(1))
+        j = nb[ia][hit]
+        cos = np.abs((model_normal[i] * model_normal[j]).sum(1))
+        return float(np.degrees(np.arccos(np.clip(np.median(cos), 0.0, 1.0))))
     queue = MergeQueue()
     priority: dict[tuple[int, int], float] = {}
 
@@ -264,6 +297,7 @@ def fit_patches(
     history: list[dict] = []
     cache: dict[tuple[int, int], _Region | None] = {}
     rejected: set[tuple[int, int]] = set()
+    crease_log: dict[tuple[int, int], tuple[float, float, float]] = {}
     counts = {"fits": 0, "candidates": 0, "accepted": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
     next_id = s0
     while True:
@@ -284,15 +318,24 @@ def fit_patches(
             counts["fits"] += pf.fits
             counts["candidates"] += 1
             ok = pf.distance < eps
-            if crease_fraction(pf.surface, pf.params[ok], cfg.min_radius * eps) > cfg.crease_fraction:
+            part_normals = np.concatenate([regions[a].normals, regions[b].normals])
+            tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
+                                         model_normals=part_normals[ok], max_angle=cfg.crease_angle)
+            seam = seam_angle(a, b)
+            crease_log[key] = (tight, turned, seam)
+            # parts meeting at a steep seam cannot be one smooth patch, however the fit rounds it
+            if seam > cfg.crease_seam or (tight > cfg.crease_fraction and turned > cfg.crease_turned):
                 cand = None
                 counts["creases"] += 1
             else:
                 (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
                 cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
-                               regions[a].origin + regions[b].origin, pf.topology)
+                               regions[a].origin + regions[b].origin, pf.topology,
+                               surface_normals(pf.surface, pf.params))
             cache[key] = cand
         record = {"a": a, "b": b, "priority": e, "energy_before": u}
+        if key in crease_log:
+            record["tight"], record["turned"], record["seam_angle"] = crease_log[key]
         if cand is None:
             record.update(accepted=False, reason="crease")
             history.append(record)
@@ -306,6 +349,8 @@ def fit_patches(
             new = next_id
             next_id += 1
             regions[new] = cand
+            current[cand.members] = new
+            model_normal[cand.members] = cand.normals
             queue.retire(a)
             queue.retire(b)
             links: dict[int, int] = {}
@@ -386,12 +431,27 @@ def fit_patches(
     labels = np.where(dist < eps, owner, -1)
     timings["finalise"] = time.perf_counter() - t
 
+    # 5b. a subsampled cloud: every input point goes to the patch it lies closest to among
+    # the patches of its nearest subset points (true projection), as an inlier within eps
+    nearest = None
+    if subset is not None:
+        t = time.perf_counter()
+        from scipy.spatial import cKDTree
+
+        _, near = cKDTree(x).query(full, k=4)
+        nearest = near[:, 0]
+        f_owner, f_dist, f_params = assign_by_projection(full, labels[near], [regions[r] for r in final], report)
+        f_owner = np.where(f_dist < eps, f_owner, -1)
+        timings["assign"] = time.perf_counter() - t
+
     # 6. trim
     t = time.perf_counter()
     patches: list[Patch] = []
+    renumber = np.full(len(final) + 1, -1, dtype=np.int64)  # final index -> patch index (last: -1)
     for i, r in enumerate(final):
         idx = np.flatnonzero(labels == i)
         reg = regions[r]
+        # trimmed on the merged points' feet (the subset of a large cloud: its outline is the same)
         faces = trim_patch(params[idx], reg.surface, reg.closed) if len(idx) >= 3 else []
         if not faces:
             labels[idx] = -1
@@ -404,14 +464,26 @@ def fit_patches(
             offset += len(v)
         mesh = (np.concatenate(vs), np.concatenate(fs))
         labels[idx] = len(patches)
-        patches.append(Patch(reg.surface, reg.closed, faces, idx, dist[idx], params[idx], reg.origin, mesh))
+        renumber[i] = len(patches)
+        if subset is not None:
+            idx = np.flatnonzero(f_owner == i)
+            patches.append(Patch(reg.surface, reg.closed, faces, idx, f_dist[idx], f_params[idx], reg.origin, mesh))
+        else:
+            patches.append(Patch(reg.surface, reg.closed, faces, idx, dist[idx], params[idx], reg.origin, mesh))
         report("trim", i + 1, len(final))
     timings["trim"] = time.perf_counter() - t
+    if subset is not None:
+        # the input's own labels, distances, normals and planar start (of the nearest subset point)
+        labels, dist = renumber[f_owner], f_dist
+        nrm = nrm[nearest] if normals is None else np.asarray(
+            normals.detach().cpu().numpy() if isinstance(normals, torch.Tensor) else normals, dtype=np.float64)
+        labels0 = labels0[nearest]
+        n = len(full)
 
     # 7. metrics
     t = time.perf_counter()
     report("metrics", 0, 1)
-    m = patch_metrics(x, labels, np.where(labels >= 0, dist, 0.0), [p.mesh for p in patches], eps, truth=truth, seed=cfg.seed)
+    m = patch_metrics(full, labels, np.where(labels >= 0, dist, 0.0), [p.mesh for p in patches], eps, truth=truth, seed=cfg.seed)
     final_total = Contribution(int((labels >= 0).sum()), float(dist[labels >= 0].sum() / eps))
     m["energy"], parts = energy(final_total, len(patches), s0, n, cfg.weights)
     m["energy_parts"] = parts
@@ -419,4 +491,52 @@ def fit_patches(
     timings["metrics"] = time.perf_counter() - t
     counts["stale_pops"] = queue.stale_pops
     counts["pushes"] = queue.pushes
-    return PatchSet(patches, labels, x, nrm, labels0, cfg, eps, history, energies, m, planar, timings, counts)
+    counts["merged_points"] = int(len(x))
+    return PatchSet(patches, labels, full, nrm, labels0, cfg, eps, history, energies, m, planar, timings, counts)
+
+
+#: Bytes per input point of a run beyond the merge subset: the points, normals, labels,
+#: distances and foot parameters, the 4-neighbour query, the metrics' kNN queries and the
+#: projection chunks' temporaries (measured peak over input size, rounded up).
+BYTES_PER_POINT = 600
+#: Bytes of the rest: torch, the fits of the merge subset (max_points), the trimmed meshes
+#: and the output samples of the metrics.
+BASE_BYTES = 1.5 * 2**30
+CHUNK = 65_536
+
+
+def patch_memory(n_points: int) -> float:
+    """An upper estimate of the bytes :func:`fit_patches` needs for ``n_points`` input points."""
+    return BASE_BYTES + BYTES_PER_POINT * float(n_points)
+
+
+def check_patch_memory(n_points: int, what: str = "the input", *, budget: float | None = None) -> None:
+    """Refuse, before any work, a cloud whose run would not fit in memory (one-line OptionError)."""
+    from .._budget import require_memory
+
+    require_memory(patch_memory(n_points), f"multi-patch fitting of {what} ({n_points:,} points)",
+                   "subsample the cloud (e.g. --sample) to fewer points", budget=budget)
+
+
+def assign_by_projection(points: np.ndarray, candidates: np.ndarray, regions: list[_Region],
+                         report: Progress) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Owner ``(N,)`` (-1: outlier), distance ``(N,)`` and foot parameters ``(N, 2)`` of every point.
+
+    ``candidates (N, k)`` holds, per point, the indices of the patches (-1: none) of its
+    nearest merged points; a point is projected (the core's projection, in chunks of
+    ``CHUNK`` points) onto each of its candidate patches and kept by the closest within
+    the inlier tolerance by the caller.
+    """
+    n = len(points)
+    owner = np.full(n, -1, dtype=np.int64)
+    dist = np.full(n, np.inf)
+    params = np.zeros((n, 2))
+    for i, reg in enumerate(regions):
+        pts = np.flatnonzero((candidates == i).any(axis=1))
+        for start in range(0, len(pts), CHUNK):
+            chunk = pts[start : start + CHUNK]
+            p, d = point_distances(reg.surface, points[chunk], reg.closed)
+            better = d < dist[chunk]
+            owner[chunk[better]], dist[chunk[better]], params[chunk[better]] = i, d[better], p[better]
+        report("assign", i + 1, len(regions))
+    return owner, dist, params

@@ -60,13 +60,18 @@ def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = 
 
 
 def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
-    """Smallest radius of curvature ``1 / max |k_i|`` at ``params (M, 2)`` -> ``(M,)``.
+    """Smallest radius of curvature ``1 / max |k_i|`` at ``params (M, 2)`` -> ``(M,)``."""
+    return bend(surface, params)[0]
+
+
+def bend(surface: NURBSSurface, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest radius of curvature ``(M,)`` and unit normal ``(M, 3)`` at ``params (M, 2)``.
 
     Principal curvatures from the first and second fundamental forms (do Carmo, section
     3-3): ``k`` solves ``det(II - k I) = 0``.
     """
     if len(params) == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros((0, 3))
     with torch.no_grad():
         d = surface.detach().derivatives(torch.as_tensor(params, dtype=surface.dtype, device=surface.device), order=2)
     d = d.cpu().double().numpy()
@@ -80,7 +85,18 @@ def bend_radii(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
     H = (E * N - 2 * F * M + G * L) / (2 * det)
     K = (L * N - M * M) / det
     kmax = np.abs(H) + np.sqrt(np.maximum(H * H - K, 0.0))
-    return 1.0 / np.maximum(kmax, 1e-300)
+    return 1.0 / np.maximum(kmax, 1e-300), n
+
+
+def surface_normals(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
+    """Unit normals ``(M, 3)`` of ``surface`` at ``params (M, 2)`` (first derivatives only)."""
+    if len(params) == 0:
+        return np.zeros((0, 3))
+    with torch.no_grad():
+        d = surface.detach().derivatives(torch.as_tensor(params, dtype=surface.dtype, device=surface.device), order=1)
+    d = d.cpu().double().numpy()
+    n = np.cross(d[:, 1, 0], d[:, 0, 1])
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
@@ -216,8 +232,32 @@ def refine_patch(surface: NURBSSurface, topology: Topology, points: np.ndarray, 
 
 def crease_fraction(surface: NURBSSurface, params: np.ndarray, min_radius: float, limit: int = 4000) -> float:
     """Fraction of the given foot points where the patch bends tighter than ``min_radius``."""
+    return crease_stats(surface, params, min_radius, limit=limit)[0]
+
+
+def crease_stats(surface: NURBSSurface, params: np.ndarray, min_radius: float, *, limit: int = 4000,
+                 model_normals: np.ndarray | None = None, max_angle: float = 90.0) -> tuple[float, float]:
+    """``(tight, turned)``: how much of a patch bends tightly, and how much of that rounds a crease.
+
+    ``tight`` is the fraction of the foot points ``params (M, 2)`` where the patch bends
+    tighter than ``min_radius``; ``turned`` the fraction of those tight points where its
+    normal turns more than ``max_angle`` degrees away from ``model_normals (M, 3)``, the
+    normal each point had in the part it came from (a planar region's plane normal, a
+    fitted part's surface normal); 0 without ``model_normals``. Across a sharp edge the
+    parts are flat up to the edge, so a patch that rounds it turns away from both parts
+    on much of its bend; a fillet cut into planar strips keeps each strip's normal within
+    the strips' angular tolerance, so a patch that follows the fillet bends tightly while
+    staying close to its parts' normals.
+    """
     if len(params) == 0:
-        return 0.0
+        return 0.0, 0.0
     if len(params) > limit:
-        params = params[np.linspace(0, len(params) - 1, limit).astype(int)]
-    return float(np.mean(bend_radii(surface, params) < min_radius))
+        pick = np.linspace(0, len(params) - 1, limit).astype(int)
+        params = params[pick]
+        model_normals = None if model_normals is None else model_normals[pick]
+    radii, normals = bend(surface, params)
+    tight = radii < min_radius
+    if model_normals is None or not tight.any():
+        return float(np.mean(tight)), 0.0
+    cos = np.abs((normals[tight] * model_normals[tight]).sum(1))
+    return float(np.mean(tight)), float(np.mean(cos < np.cos(np.radians(max_angle))))
