@@ -59,7 +59,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(prog="nurbskit", description="NURBS geometry from point clouds, meshes and silhouettes.")
     parser.add_argument("--version", action="version", version=f"nurbskit {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    own = f"nurbskit.cli.{command}_command" if command else None
+    own = f"nurbskit.cli.{command.replace('-', '_')}_command" if command else None
     for name in (own,) if own in COMMAND_MODULES else COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
     return parser
