@@ -148,16 +148,17 @@ def _wait(predicate, what: str, timeout: float = 30.0):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def settle(apply, check, what: str, attempts: int = 4):
+def settle(apply, check, what: str, attempts: int = 6, held=None):
     """Type into the page until the server holds the values: under load a browser may
-    lose an edit to a re-render, and typing again is what a person would do."""
+    lose an edit to a re-render, and typing again is what a person would do.
+    ``held()`` says what the server holds, for the failure message."""
     for _ in range(attempts):
         apply()
         try:
             return _wait(check, what, timeout=8.0)
         except AssertionError:
             continue
-    raise AssertionError(f"timed out waiting for {what}")
+    raise AssertionError(f"timed out waiting for {what}" + (f" (the server holds {held()})" if held else ""))
 
 
 def field(page, label: str, nth: int = 0):
@@ -480,8 +481,10 @@ def test_supervised_fit_side_by_side(page, area):
             grid = field(page, "Target grid", i)
             grid.fill("12")
             grid.press("Enter")
+        page.keyboard.press("Tab")  # leave the last field: the edit is committed on blur too
 
-    settle(apply, lambda: tab.iters.value == 20 and tuple(tab.resolution.value) == (12, 12), "the settings")
+    settle(apply, lambda: tab.iters.value == 20 and tuple(tab.resolution.value) == (12, 12), "the settings",
+           held=lambda: (tab.iters.value, tuple(tab.resolution.value)))
     page.get_by_role("button", name="Fit", exact=True).click()
     see(page, "RMS to target", 60000)
     assert tab.result is not None and tab.result.surface.sizes == (5, 5)
