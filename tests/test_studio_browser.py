@@ -168,10 +168,19 @@ def field(page, label: str, nth: int = 0):
     return lab.locator("xpath=ancestor::div[2]").locator("input").nth(nth)
 
 
-def set_number(page, label: str, value) -> None:
-    box = field(page, label)
+def set_number(page, label: str, value, near: str | None = None) -> None:
+    box = field(page, label) if near is None else field_near(page, near, label)
     box.fill(str(value))
     box.press("Enter")
+
+
+def field_near(page, anchor: str, label: str):
+    """The input labelled ``label`` in the same panel as the label ``anchor``: for labels
+    that several tabs share (a full-suite run once typed into another tab's copy)."""
+    lab = page.locator("label:visible", has_text=anchor).first
+    lab.wait_for(timeout=20000)
+    panel = lab.locator(f"xpath=ancestor::div[.//label[contains(., {label!r})]][1]")
+    return panel.locator("label", has_text=label).first.locator("xpath=ancestor::div[2]").locator("input").first
 
 
 def upload(page, button: str, files) -> None:
@@ -476,7 +485,7 @@ def test_supervised_fit_side_by_side(page, area):
     page.get_by_role("option", name="SOC", exact=True).click()
     _wait(lambda: tab.pipeline.value == "SOC", "the pipeline choice")
     def apply():
-        set_number(page, "Iterations", 20)
+        set_number(page, "Iterations", 20, near="Target grid")
         for i in (0, 1):
             grid = field(page, "Target grid", i)
             grid.fill("12")
