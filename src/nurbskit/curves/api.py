@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -28,15 +27,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     """
     from PIL import Image, UnidentifiedImageError
 
+    from ..io._base import check_readable
     from .classic import to_grey
 
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
-    if path.is_dir():
-        raise InputError(f"{path}: is a directory, expected an image file (PNG, JPEG, ...)")
-    if path.stat().st_size == 0:
-        raise InputError(f"{path}: the file is empty, expected an image (PNG, JPEG, ...)")
+    path = check_readable(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
