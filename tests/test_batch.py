@@ -244,7 +244,10 @@ def test_local_workers_allocate_like_a_plain_process(client):
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ (which pins glibc's mmap threshold and, for a
     # fit, doubles the CPU time in page faults); the batch's local cluster leaves it unset,
     # also in a worker its nanny restarted (found by running this after the killed-worker test).
+    # A worker killed by an earlier test may still be coming back: count both before and after.
+    client.wait_for_workers(2, timeout=120)
     client.restart_workers([next(iter(client.scheduler_info()["workers"]))])
+    client.wait_for_workers(2, timeout=120)
     env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
     assert len(env) == 2 and set(env.values()) == {os.environ.get("MALLOC_TRIM_THRESHOLD_")}
     # and without the statistical profiler sampling the fits' stacks every 10 ms
