@@ -110,6 +110,8 @@ def _open(browser, studio, **kw):
     pg.get_by_role("tab", name="Unsupervised", exact=True).wait_for(timeout=30000)
     _wait(lambda: set(studio.sessions) - before, "a session for the page")
     pg.session = studio.sessions[max(set(studio.sessions) - before)]
+    # the widgets come first; the tabs are activated once the fitting code has imported
+    _wait(lambda: pg.session.active, "the page's tabs to be activated", timeout=120.0)
     return context, pg
 
 

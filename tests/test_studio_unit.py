@@ -88,7 +88,10 @@ def test_registry_shows_a_tab_only_when_its_capability_imports():
     assert labels[:3] == ["Unsupervised", "Supervised", "NURBS Generator"]
     assert "Volume from drawings" in labels
     assert not TabSpec("X", "nurbskit.no_such_module", None, "nurbskit.studio.tabs:build_volume").available()
-    assert not TabSpec("X", "nurbskit.fit", "no_such_function", "nurbskit.studio.tabs:build_volume").available()
+    missing = TabSpec("X", "nurbskit.fit", "no_such_function", "nurbskit.studio.tabs:build_volume")
+    assert not missing.available()
+    with pytest.raises(ImportError, match="no_such_function"):
+        missing.load()
     for spec in TABS:  # a listed tab has a builder, an unlisted one lacks its capability or builder
         assert (spec in available_tabs()) == (spec.available() and spec.load_builder() is not None)
 
@@ -309,9 +312,11 @@ def test_shape_tab_parts():
     assert "axis direction" in md
 
 
-def test_server_listens_before_the_fitting_code_imports(tmp_path):
+def test_page_is_built_before_the_fitting_code_imports(tmp_path):
     """Start-up order (issue 13: interactive within 3 s): ``nurbskit studio`` parses only its
-    own options and the server listens before torch is imported; the tabs come after."""
+    own options, the server listens and every tab's widgets are built (a session on the
+    server's own GUI, as a page gets it) without importing torch; then the capabilities
+    import and the tabs are activated (the generator's first object, the device list)."""
     import subprocess
     import sys
 
@@ -319,23 +324,64 @@ def test_server_listens_before_the_fitting_code_imports(tmp_path):
 
     require_extra("viser", "studio")
     script = (
-        "import sys\n"
+        "import sys, types\n"
         "from nurbskit.cli import build_parser\n"
         f"build_parser('studio').parse_args(['studio', '--workdir', {str(tmp_path)!r}])\n"
-        "from nurbskit.studio.app import Studio, StudioOptions\n"
+        "from nurbskit.studio.app import Session, Studio, StudioOptions\n"
         "before = 'torch' in sys.modules\n"
         f"s = Studio(StudioOptions(port=0, workdir={str(tmp_path)!r}))\n"
         "s.start()\n"
         "listening = s.port > 0\n"
+        "client = types.SimpleNamespace(scene=s.server.scene, gui=s.server.gui, client_id=0)\n"
+        "page = Session(s, client)\n"
+        "built = 'torch' in sys.modules or s.ready.is_set()\n"
+        "gen = page.tabs['NURBS Generator']\n"
+        "empty = gen.obj is None and page.loading is not None\n"
         "s.wait_ready(120)\n"
-        "print('RESULT', before, listening, 'torch' in sys.modules, s.load_error, [t.label for t in s.tabs][:3])\n"
+        "page.activate()\n"
+        "print('RESULT', before, listening, built, empty, 'torch' in sys.modules, s.tab_errors, list(page.tabs),\n"
+        "      gen.obj.kind, gen.root.visible, page.loading, page.tabs['Unsupervised'].device.options)\n"
         "s.stop()\n"
     )
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=180)
     assert out.returncode == 0, out.stderr[-2000:]
     [line] = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
-    assert line == "RESULT False True True None ['Unsupervised', 'Supervised', 'NURBS Generator']"
+    tabs = [t.label for t in available_tabs()]
+    devices = "('cpu', 'cuda')" if torch.cuda.is_available() else "('cpu',)"
+    # the generator's object is drawn hidden: the page opens on the Unsupervised tab
+    assert line == f"RESULT False True False True True {{}} {tabs} surface False None {devices}"
+
+
+def test_static_choices_equal_the_library():
+    """What the widgets offer, read from the sources without importing (``.choices``), is
+    what the library has when imported: the one source of truth stays the library."""
+    import nurbskit.io.cad
+    import nurbskit.shapes
+    import nurbskit.volume
+    from nurbskit.fit.pipelines import PIPELINES
+    from nurbskit.studio import choices
+    from nurbskit.studio.registry import CAD_WRITERS, cad_writers
+
+    for supervised in (False, True):
+        live = tuple(k for k, p in PIPELINES.items() if p.supervised == supervised)
+        assert choices.pipelines(supervised) == live and live
+    assert choices.shape_kinds() == tuple(nurbskit.shapes.KINDS)
+    assert choices.volume_losses() == tuple(nurbskit.volume.LOSSES)
+    for spec in TABS:
+        module = __import__(spec.requires, fromlist=["_"])
+        assert choices.exists(spec.requires)
+        if spec.attribute is not None:
+            assert choices.declares(spec.requires, spec.attribute) == hasattr(module, spec.attribute)
+        spec.load()  # imports, and finds the attribute
+    assert set(cad_writers()) == {label for label, _, module, attr in CAD_WRITERS
+                                  if hasattr(__import__(module, fromlist=["_"]), attr)}
+    assert not choices.declares("nurbskit.fit", "no_such_function") and not choices.exists("nurbskit.no_such_module")
+    # the readers on a module of their own: bindings under if/try, imports, literals, decorators
+    tree = __import__("ast").parse(
+        "import a.b\nfrom c import d as e\nX: int = 3\nif True:\n    Y = (1, 'two')\ntry:\n    Z = 1\n"
+        "except ImportError:\n    W = 2\n@reg('n', True, 's')\ndef f(): pass\nclass C: pass\n")
+    assert choices.top_level_names(tree) == {"a", "e", "X", "Y", "Z", "W", "f", "C"}
 
 
 def test_curves_tab_parts(monkeypatch):

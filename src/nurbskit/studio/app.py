@@ -26,6 +26,7 @@ import numpy as np
 
 from .._optional import require
 from ..errors import NurbskitError, OptionError
+from . import choices
 from .registry import available_tabs, cad_writers
 from .workdir import Workdir, check_upload, too_large
 
@@ -107,7 +108,7 @@ class Loader:
                  on_loaded: Callable[[object, str], None], label: str = "Load"):
         self.session, self.status, self.read, self.on_loaded = session, status, read, on_loaded
         self.upload = ui.add_upload_button(f"{label}: upload a file", icon=None)
-        self.choice = ui.add_dropdown("Workdir file", self._options(), initial_value="")
+        self.choice = ui.add_dropdown("Workdir file", ("",) + session.initial_files(), initial_value="")
         self.path = ui.add_text("Path in workdir", "")
         self.load = ui.add_button(f"{label} from workdir")
         self.refresh = ui.add_button("Refresh file list")
@@ -353,7 +354,7 @@ class ExportPanel:
 # ---- the parts of a tab, in one order ----------------------------------------------------
 
 def devices() -> tuple[str, ...]:
-    """The devices a fit may run on here."""
+    """The devices a fit may run on here (imports torch)."""
     import torch
 
     return ("cpu", "cuda") if torch.cuda.is_available() else ("cpu",)
@@ -405,7 +406,8 @@ class TabBase:
         return self.loader
 
     def add_device(self):
-        self.device = self.ui.add_dropdown("Device", devices(), initial_value="cpu")
+        # "cuda" is offered once torch has loaded and says it is there (activate)
+        self.device = self.ui.add_dropdown("Device", ("cpu",), initial_value="cpu")
         return self.device
 
     def add_runner(self, label: str) -> RunPanel:
@@ -415,6 +417,16 @@ class TabBase:
     def add_export(self, formats=None) -> ExportPanel:
         self.export = ExportPanel(self.session, self.ui, self.status, self.shown, formats)
         return self.export
+
+    def activate(self) -> None:
+        """Called once the fitting code (torch, the capabilities) has loaded: what needs it.
+
+        The widgets are built before (from plain data, see :mod:`.choices`), so that the
+        page is interactive while torch still imports.
+        """
+        device = getattr(self, "device", None)
+        if device is not None and tuple(device.options) != devices():
+            device.options = devices()
 
     def guard(self, fn) -> None:
         """Run ``fn`` (a widget's handler); an exception is shown in the tab, the server carries on."""
@@ -430,7 +442,12 @@ class TabBase:
 # ---- one browser tab ---------------------------------------------------------------------
 
 class Session:
-    """Everything one browser tab (viser client) has: its GUI, scene and data."""
+    """Everything one browser tab (viser client) has: its GUI, scene and data.
+
+    The tabs' widgets are built at once, from plain data (no torch); :meth:`activate`
+    runs once the fitting code has loaded and does what needs it (the generator's first
+    object, the device list).
+    """
 
     def __init__(self, studio: "Studio", client):
         self.studio, self.client = studio, client
@@ -438,9 +455,14 @@ class Session:
         self.tabs: dict[str, object] = {}
         self.errors: list[str] = []
         self.upload_status: dict[str, Status] = {}  # upload button uuid -> its tab's status
+        self.focused: str | None = None  # the tab whose objects the 3-D view shows
+        self.active = False
+        self._files: tuple[str, ...] | None = None
         self._refuse_large_uploads()
         client.scene.set_up_direction("+z")
         with client.gui.add_folder("nurbskit studio", expand_by_default=True):
+            self.loading = None if studio.ready.is_set() else client.gui.add_markdown(
+                "*Loading the fitting code ...*")
             group = client.gui.add_tab_group()
             for spec in studio.tabs:
                 with group.add_tab(spec.label):
@@ -451,9 +473,37 @@ class Session:
                     builder = spec.load_builder()
                     self.tabs[spec.label] = builder(self, client.gui)
         self.group = group
+        if self.tabs:  # the page opens on the first tab: only its objects are shown
+            self.focus(next(iter(self.tabs)))
+
+    def initial_files(self) -> tuple[str, ...]:
+        """The workdir's files when the page was built (listed once for every tab's loader)."""
+        if self._files is None:
+            self._files = tuple(self.workdir.files())
+        return self._files
+
+    def activate(self) -> None:
+        """The fitting code has loaded: let every tab do what needs it (once)."""
+        if self.active:
+            return
+        self.active = True
+        for label, tab in self.tabs.items():
+            problem = self.studio.tab_errors.get(label)
+            if problem is not None:
+                tab.status.error(f"this tab's code could not be loaded: {problem}")
+                continue
+            try:
+                tab.activate()
+            except Exception as exc:  # noqa: BLE001 - shown in the tab; the others carry on
+                tab.status.error(describe_error(exc))
+                self.log_exception(exc)
+        if self.loading is not None:
+            self.loading.remove()
+            self.loading = None
 
     def focus(self, label: str) -> None:
         """Show the scene of tab ``label`` only."""
+        self.focused = label
         for name, tab in self.tabs.items():
             root = getattr(tab, "root", None)
             if root is not None:
@@ -535,19 +585,24 @@ class Studio:
     def __init__(self, options: StudioOptions):
         self.options = options
         self.workdir = Workdir(options.workdir)
-        self.tabs: list = []  # filled by the loader thread (see start)
-        self.ready = threading.Event()
-        self.load_error: str | None = None
+        self.tabs = available_tabs()  # read from the sources: nothing is imported (see .choices)
+        self.ready = threading.Event()  # set once the tabs' capabilities are imported (_load)
+        self.tab_errors: dict[str, str] = {}  # tab label -> why its capability did not import
         self.sessions: dict[int, Session] = {}
         self.server = None
+        self._loader: threading.Thread | None = None
         self._lock = threading.Lock()
 
     def start(self) -> "Studio":
-        """Listen first, then import the fitting code (torch, the capabilities) on a thread.
+        """Listen; the fitting code (torch, the capabilities) is imported once a page is up.
 
-        The page's code (a few MB of JavaScript) loads in the browser while the
-        capabilities import here; a client that connects before they are in sees a
-        "loading" line, and its tabs are built as soon as they are (:meth:`_connect`).
+        A client that connects gets its widgets at once: they are built from plain data
+        read from the library's sources (:mod:`.choices`, read on a thread while the
+        browser fetches the page's code, a few MB of JavaScript). Then the capabilities
+        import on a thread (:meth:`_load`; the first page is drawn in the browser
+        meanwhile, and the server's Python is free of the import while it builds the
+        widgets) and the tabs are activated (:meth:`Session.activate`). A click that
+        needs the code before then waits for it.
         """
         viser = require("viser", "studio", "nurbskit studio")
         self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
@@ -558,20 +613,31 @@ class Studio:
         self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
-        threading.Thread(target=self._load, name="nurbskit-studio-import", daemon=True).start()
+        threading.Thread(target=choices.warm, name="nurbskit-studio-choices", daemon=True).start()
+        return self
+
+    def load(self) -> "Studio":
+        """Start importing the tabs' capabilities on a thread (once; :meth:`wait_ready` waits for it)."""
+        with self._lock:
+            if self._loader is None:
+                self._loader = threading.Thread(target=self._load, name="nurbskit-studio-import", daemon=True)
+                self._loader.start()
         return self
 
     def _load(self) -> None:
-        """Import every tab's capability and builder (the slow part of start-up: torch)."""
+        """Import every tab's capability (the slow part of start-up: torch)."""
         try:
-            self.tabs = available_tabs()
-        except BaseException as exc:  # noqa: BLE001 - shown in every page; the server keeps serving
-            self.load_error = describe_error(exc)
+            for spec in self.tabs:
+                try:
+                    spec.load()
+                except Exception as exc:  # noqa: BLE001 - shown in that tab; the others work
+                    self.tab_errors[spec.label] = describe_error(exc)
         finally:
             self.ready.set()
 
     def wait_ready(self, timeout: float | None = None) -> "Studio":
-        """Block until the tabs' code is imported (a test or script that wants them now)."""
+        """Import the tabs' code now if no page has asked for it yet, and wait for it."""
+        self.load()
         if not self.ready.wait(timeout):
             raise TimeoutError(f"the studio's tabs were not ready after {timeout} s")
         return self
@@ -588,16 +654,12 @@ class Studio:
 
     def _connect(self, client) -> None:
         # viser runs this on a worker thread: waiting here for the imports holds no one else up
-        if not self.ready.is_set():
-            notice = client.gui.add_markdown("*Loading nurbskit's fitting code ...*")
-            self.ready.wait()
-            notice.remove()
-        if self.load_error is not None:
-            client.gui.add_markdown(f"**Error:** the studio could not load its tabs: {html.escape(self.load_error)}")
-            return
         session = Session(self, client)
         with self._lock:
             self.sessions[client.client_id] = session
+        self.load()  # the first page's widgets are on their way: import the fitting code now
+        self.ready.wait()
+        session.activate()
 
     def _disconnect(self, client) -> None:
         with self._lock:

@@ -20,9 +20,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
-import torch
 
-from .. import NURBSCurve, NURBSSurface, NURBSVolume
 from ..errors import OptionError
 from .app import TabBase
 from .scene import SURFACE_COLOR, SplineView, diagonal
@@ -44,6 +42,10 @@ def make_object(kind: str, sizes, degrees, knots: str):
         ``(object, periodic_free)``: the float64 object and, when periodic, the number of
         free control points along u (else None).
     """
+    import torch
+
+    from .. import NURBSCurve, NURBSSurface, NURBSVolume
+
     k = {"curve": 1, "surface": 2, "volume": 3}[kind]
     sizes = [int(s) for s in sizes[:k]]
     degrees = [int(p) for p in degrees[:k]]
@@ -148,9 +150,24 @@ class GeneratorTab(TabBase):
         self.split_button.on_click(lambda e: self.guard(lambda: self._op("split")))
         self.display.on_update(lambda e: self.guard(self._redisplay))
         self.handle.on_update(lambda e: self.guard(self._from_handle))
-        # the first object is built but drawn hidden: the page opens on another tab, and
-        # its first paint need not wait for the surface's shaders (software WebGL: seconds)
-        self.guard(lambda: self.rebuild(show=False))
+        # the first object is built once the fitting code has loaded (activate), or when
+        # the page asks for it before that (_need)
+
+    def activate(self) -> None:
+        """Build the first object. It is drawn hidden unless this tab is the one shown: the
+        page opens on another tab, and its first paint need not wait for the surface's
+        shaders (software WebGL: seconds)."""
+        super().activate()
+        with self.lock:
+            if self.obj is None:
+                self.rebuild(show=self.session.focused == self.label)
+
+    def _need(self):
+        """The object being edited (built now if the page is used before :meth:`activate`)."""
+        with self.lock:
+            if self.obj is None:
+                self.rebuild(show=False)
+            return self.obj
 
     # ---- building ------------------------------------------------------------------------
     def rebuild(self, show: bool = True) -> None:
@@ -160,15 +177,15 @@ class GeneratorTab(TabBase):
             self.status.info(f"created a {obj.kind} with {tuple(obj.sizes)} control points")
 
     def set_object(self, obj, periodic_free=None, other=None, frame: bool = True, show: bool = True) -> None:
-        """Edit ``obj`` from now on; ``show``: bring this tab to the 3-D view (else drawn hidden)."""
+        """Edit ``obj`` from now on; ``show``: bring this tab to the 3-D view (else it stays as it is)."""
+        import torch
+
         with self.lock:
             self.obj = obj.to(torch.float64).clone()
             self.periodic_free = periodic_free
             self.other = other
             if show:
                 self.session.focus(self.label)
-            else:
-                self.root.visible = False
             self.view.mode = self.display.value
             self.view.clear()
             self.view.draw(self.obj)
@@ -191,13 +208,15 @@ class GeneratorTab(TabBase):
 
     def _redisplay(self) -> None:
         with self.lock:
+            if self.obj is None:
+                return  # the first object takes the display mode when it is built
             self.view.mode = self.display.value
             self.view.clear()
             self.view.draw(self.obj)
 
     # ---- picking and moving a point ------------------------------------------------------
     def _index(self) -> tuple[int, ...]:
-        k = self.obj.para_dim
+        k = self._need().para_dim
         idx = tuple(int(i) for i in self.index.value[:k])
         for a, (i, n) in enumerate(zip(idx, self.obj.sizes)):
             if not 0 <= i < n:
@@ -240,6 +259,8 @@ class GeneratorTab(TabBase):
 
     def set_point(self, idx: tuple[int, ...], xyz, source: str = "api") -> None:
         """Move control point ``idx`` to ``xyz`` and redraw (the drag update path)."""
+        import torch
+
         with self.lock:
             cp = self.obj.control_points
             value = torch.as_tensor(np.asarray(xyz, dtype=np.float64)[: cp.shape[-1]], dtype=cp.dtype)
@@ -276,7 +297,7 @@ class GeneratorTab(TabBase):
 
         with self.lock:
             axis = AXES.index(self.axis.value)
-            if axis >= self.obj.para_dim:
+            if axis >= self._need().para_dim:
                 raise OptionError(f"a {self.obj.kind} has no {self.axis.value} direction")
             a, b = self.obj.domain[axis]
             value = a + float(self.at.value) * (b - a)

@@ -1,10 +1,15 @@
 """The tabs of the studio, and the capability each one needs.
 
 A tab is listed with the module (and, optionally, the attribute) its capability lives
-in; it appears on the page only when that module imports and has the attribute. So a
-capability that another part of nurbskit adds later (multi-patch fitting in
+in; it appears on the page only when that module exists and declares the attribute. So
+a capability that another part of nurbskit adds later (multi-patch fitting in
 ``nurbskit.patches``, CAD exchange in ``nurbskit.io.cad``) shows up in the studio with
 no change here beyond its line in :data:`TABS` and its builder.
+
+Whether a capability exists is read from its source (:mod:`.choices`), not by importing
+it: the capabilities import torch, which takes longer than the page may (issue 13: the
+page is interactive within 3 s). They are imported in the background once the page is
+up (:meth:`TabSpec.load`); one that then fails to import says so in its tab.
 
 Convention: a builder is ``build(session, ui) -> Tab`` where ``ui`` is the client's GUI
 API inside the tab's context and ``Tab`` has ``scene_root`` (the scene-tree node under
@@ -15,6 +20,8 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
+
+from . import choices
 
 
 @dataclass(frozen=True)
@@ -27,12 +34,16 @@ class TabSpec:
     builder: str  # "module:function" inside nurbskit.studio
 
     def available(self) -> bool:
-        """True when the capability imports (and has ``attribute``)."""
-        try:
-            module = importlib.import_module(self.requires)
-        except ImportError:
+        """True when the capability's module exists (and declares ``attribute``): read, not imported."""
+        if not choices.exists(self.requires):
             return False
-        return self.attribute is None or hasattr(module, self.attribute)
+        return self.attribute is None or choices.declares(self.requires, self.attribute)
+
+    def load(self) -> None:
+        """Import the capability (torch and all); raises ImportError naming what is missing."""
+        module = importlib.import_module(self.requires)
+        if self.attribute is not None and not hasattr(module, self.attribute):
+            raise ImportError(f"{self.requires} has no {self.attribute}")
 
     def load_builder(self):
         module, _, name = self.builder.partition(":")
@@ -54,7 +65,7 @@ TABS: tuple[TabSpec, ...] = (
 
 
 def available_tabs() -> list[TabSpec]:
-    """The tabs whose capability imports and whose builder exists, in display order."""
+    """The tabs whose capability exists and whose builder exists, in display order (imports no capability)."""
     out = []
     for spec in TABS:
         if spec.available() and spec.load_builder() is not None:
@@ -70,14 +81,17 @@ CAD_WRITERS = (
 )
 
 
+def _deferred(module: str, attr: str):
+    """``module.attr(...)``, imported on the first call (the CAD code imports torch)."""
+
+    def writer(*args, **kwargs):
+        return getattr(importlib.import_module(module), attr)(*args, **kwargs)
+
+    writer.__qualname__ = f"{module}.{attr}"
+    return writer
+
+
 def cad_writers() -> dict[str, tuple[str, object]]:
-    """``{label: (extension, writer)}`` for the CAD writers that exist now."""
-    out = {}
-    for label, ext, module, attr in CAD_WRITERS:
-        try:
-            writer = getattr(importlib.import_module(module), attr, None)
-        except ImportError:
-            writer = None
-        if callable(writer):
-            out[label] = (ext, writer)
-    return out
+    """``{label: (extension, writer)}`` for the CAD writers that exist now (imported on first use)."""
+    return {label: (ext, _deferred(module, attr)) for label, ext, module, attr in CAD_WRITERS
+            if choices.declares(module, attr)}

@@ -12,9 +12,9 @@ object's bounding-box diagonal so that clouds in millimetres and in metres look 
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from ..core.tessellate import grid_faces
+# torch and nurbskit.core are imported where they are used: this module is imported while
+# the page's widgets are built, before the fitting code has loaded (see .choices)
 
 SURFACE_COLOR = (90, 160, 230)
 RESULT_COLOR = (240, 150, 60)
@@ -44,7 +44,7 @@ def colormap(values: np.ndarray, lo: float | None = None, hi: float | None = Non
 
 
 def _np(x) -> np.ndarray:
-    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+    return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x)
 
 
 def net_segments(cp: np.ndarray) -> np.ndarray:
@@ -74,6 +74,8 @@ def gaussian_curvature(surface, resolution: tuple[int, int]) -> np.ndarray:
     From the first and second fundamental forms (do Carmo, *Differential Geometry of
     Curves and Surfaces*, 3.3), with derivatives from the surface itself.
     """
+    import torch
+
     u, v = surface.grid_axes(resolution)
     with torch.no_grad():
         d = surface.evaluate_grid(u, v, order=2)  # (R, S, 3, 3, dim)
@@ -109,6 +111,10 @@ class SplineView:
     # ---- geometry ---------------------------------------------------------------------
     def _body(self, obj):
         """``(vertices (V, 3), faces (F, 3), lines (K, 2, 3), grid)`` of the object's body."""
+        import torch
+
+        from ..core.tessellate import grid_faces
+
         res = self.resolution
         with torch.no_grad():
             if obj.para_dim == 1:
@@ -176,6 +182,8 @@ class SplineView:
             self.handles["mesh"] = s.add_mesh_simple(f"{self.name}/surface", vertices, faces, color=self.color,
                                                      side="double")
         if self.mode == "normals" and obj.para_dim == 2:
+            import torch
+
             g = self.resolution
             u, v = obj.grid_axes((g, g))
             with torch.no_grad():

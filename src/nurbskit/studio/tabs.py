@@ -16,11 +16,22 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from ..errors import InputError, OptionError
+from . import choices
 from .app import TabBase, iteration_progress, markdown_table, read_upload
 from .scene import RESULT_COLOR, SURFACE_COLOR, SplineView, colormap, diagonal, draw_mesh, draw_points
+
+
+def f64(obj):
+    """A nurbskit object (or tensor) detached, in float64.
+
+    torch is imported here and in the other methods that use it, not at the top: the tabs
+    are built before the fitting code has loaded (see :mod:`.choices`).
+    """
+    import torch
+
+    return obj.detach().to(torch.float64)
 
 
 def _apply_iterations(cfg, iterations: int):
@@ -149,11 +160,9 @@ class UnsupervisedTab(CloudTab):
     scene = "unsupervised"
 
     def __init__(self, session, ui):
-        from ..fit.pipelines import PIPELINES
-
         self.result = None
         super().__init__(session, ui)
-        names = tuple(k for k, p in PIPELINES.items() if not p.supervised)
+        names = choices.pipelines(supervised=False)
         self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="default" if "default" in names else names[0])
         self.ctrl = ui.add_vector2("Control grid", (15, 15), min=(2, 2), max=(64, 64), step=1)
         self.degree = ui.add_vector2("Degree", (3, 3), min=(1, 1), max=(7, 7), step=1)
@@ -186,6 +195,8 @@ class UnsupervisedTab(CloudTab):
         cfg = self.config()
         progress(0.0)
         # the fit runs where its inputs are: the device choice only moves the points
+        import torch
+
         points = torch.as_tensor(points, dtype=torch.float64).to(self.device.value)
         result = nurbskit.fit_surface(points, cfg, callback=iteration_progress(progress, cfg.total_iters))
         from ..fit import fit_report
@@ -197,7 +208,7 @@ class UnsupervisedTab(CloudTab):
         result, report = out
         self.result = result
         self.session.focus(self.label)
-        self.surface_view.draw(result.surface.detach().to(torch.float64))
+        self.surface_view.draw(f64(result.surface))
         if self.show_error.value:
             d = report["_distances"].detach().cpu().numpy()
             colors = colormap(d, 0.0, float(np.percentile(d, 99)) or 1.0)
@@ -207,7 +218,7 @@ class UnsupervisedTab(CloudTab):
         self.status.info(f"fit finished: {report['iterations']} iterations in {report['seconds']:.2f} s")
 
     def shown(self):
-        surface = None if self.result is None else self.result.surface.detach().to(torch.float64)
+        surface = None if self.result is None else f64(self.result.surface)
         return surface, None, f"{self.name}-{self.pipeline.value}"
 
 
@@ -225,8 +236,6 @@ class SupervisedTab(TabBase):
     stem = "target"
 
     def __init__(self, session, ui):
-        from ..fit.pipelines import PIPELINES
-
         super().__init__(session, ui)
         self.target = None
         self.result = None
@@ -239,7 +248,7 @@ class SupervisedTab(TabBase):
         self.weights_upload.on_upload(lambda event: self.guard(self._weights_uploaded))
         session.upload_status[self.weights_upload._impl.uuid] = self.status
         self.add_loader("Load NURBS")
-        names = tuple(k for k, p in PIPELINES.items() if p.supervised)
+        names = choices.pipelines(supervised=True)
         self.pipeline = ui.add_dropdown("Pipeline", names, initial_value="SC" if "SC" in names else names[0])
         self.resolution = ui.add_vector2("Target grid", (32, 32), min=(2, 2), max=(256, 256), step=1)
         self.iters = ui.add_number("Iterations (0: the pipeline's)", 0, min=0, max=100000, step=1)
@@ -285,7 +294,7 @@ class SupervisedTab(TabBase):
         return obj
 
     def _loaded(self, obj, name: str) -> None:
-        self.target, self.result, self.name = obj.to(torch.float64), None, Path(name).stem or "target"
+        self.target, self.result, self.name = f64(obj), None, Path(name).stem or "target"
         self.session.focus(self.label)
         self.result_view.clear()
         self.truth_view.draw(self.target)
@@ -311,7 +320,7 @@ class SupervisedTab(TabBase):
         result, report = out
         self.result = result
         self.session.focus(self.label)
-        surface = result.surface.detach().to(torch.float64)
+        surface = f64(result.surface)
         # side by side: the result to the right of the ground truth
         shift = 1.2 * diagonal(self.target.control_points.numpy())
         self.result_view.offset = np.array([shift, 0.0, 0.0])
@@ -324,7 +333,7 @@ class SupervisedTab(TabBase):
                          "ground truth left (blue), result right (orange)")
 
     def shown(self):
-        obj = self.result.surface.detach().to(torch.float64) if self.result is not None else self.target
+        obj = f64(self.result.surface) if self.result is not None else self.target
         return obj, None, f"{self.name}-{self.pipeline.value}"
 
 
@@ -504,12 +513,10 @@ class ShapeTab(CloudTab):
     purpose = "a shape fit"
 
     def __init__(self, session, ui):
-        from ..shapes import KINDS
-
         self.fit = None
         self.axis_handle = None
         super().__init__(session, ui)
-        kinds = ("auto",) + tuple(k for k in KINDS if k != "auto")
+        kinds = ("auto",) + tuple(k for k in choices.shape_kinds() if k != "auto")
         self.kind = ui.add_dropdown("Kind", kinds, initial_value="auto")
         self.iters = ui.add_number("Refinement iterations", 30, min=0, max=1000, step=1)
         self.add_runner("Fit shape")
@@ -538,7 +545,7 @@ class ShapeTab(CloudTab):
         self.fit = fit
         self.session.focus(self.label)
         self.surface_view.shape_key = None
-        self.surface_view.draw(fit.surface.detach().to(torch.float64))
+        self.surface_view.draw(f64(fit.surface))
         self._drop_axis()
         seg = axis_segment(fit, self.points)
         if seg is not None:
@@ -549,7 +556,7 @@ class ShapeTab(CloudTab):
         self.status.info(f"fit finished: {fit.kind}, mean distance {fit.distance_mean:.3g} of the diagonal")
 
     def shown(self):
-        surface = None if self.fit is None else self.fit.surface.detach().to(torch.float64)
+        surface = None if self.fit is None else f64(self.fit.surface)
         return surface, None, f"{self.name}-{self.fit.kind if self.fit is not None else 'shape'}"
 
 
@@ -768,7 +775,7 @@ class VolumeTab(TabBase):
 
     def __init__(self, session, ui):
         super().__init__(session, ui)
-        self.drawings: dict[str, torch.Tensor] = {}
+        self.drawings: dict[str, object] = {}  # view -> mask (H, W) tensor
         self.fit = None
         self.which = ui.add_dropdown("Drawing to load", ("front", "left", "top"), initial_value="front")
         self.add_loader("Load drawing")
@@ -776,7 +783,7 @@ class VolumeTab(TabBase):
         self.control = ui.add_number("Control values per axis", 20, min=4, max=80, step=1)
         self.grid = ui.add_number("Cost grid per axis", 20, min=4, max=128, step=1)
         self.iters = ui.add_number("Iterations", 60, min=0, max=2000, step=1)
-        self.loss = ui.add_dropdown("Cost", ("paper", "silhouette"), initial_value="paper")
+        self.loss = ui.add_dropdown("Cost", choices.volume_losses(), initial_value="paper")
         self.add_runner("Fit volume")
         self.add_export()
         self.sample.on_click(lambda event: self.guard(self._paper))
