@@ -410,3 +410,36 @@ def test_curves_tab_parts(monkeypatch):
     assert method_options() == expected
     monkeypatch.setattr(api, "curves_from_image", with_mode)
     assert method_options() == {"mode": "auto"}
+
+
+def test_widget_defaults_are_the_librarys(tmp_path):
+    """The tabs' widgets start at the library's own defaults where the studio does not
+    choose otherwise (PatchConfig's, fit_shape's, curves_from_image's), and offer its
+    choices: a page built on the server's own GUI, as a browser gets it."""
+    import inspect
+    import types
+
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
+    from nurbskit.curves.api import METHODS, curves_from_image
+    from nurbskit.patches import PatchConfig
+    from nurbskit.shapes import KINDS, fit_shape
+    from nurbskit.studio.app import Session, Studio, StudioOptions
+
+    s = Studio(StudioOptions(port=0, workdir=tmp_path)).start()
+    try:
+        page = Session(s, types.SimpleNamespace(scene=s.server.scene, gui=s.server.gui, client_id=0))
+        patches, shape, curves = page.tabs["Patches"], page.tabs["Revolve / Extrude"], page.tabs["Curves from images"]
+        cfg = PatchConfig()
+        assert patches.eps.value == cfg.eps and tuple(patches.weights.value) == tuple(cfg.weights)
+        assert patches.max_ctrl.value == cfg.max_ctrl and patches.final_iters.value == cfg.final_iters
+        assert shape.iters.value == inspect.signature(fit_shape).parameters["iterations"].default
+        assert set(shape.kind.options) == set(KINDS) and shape.kind.value == "auto"
+        sig = inspect.signature(curves_from_image).parameters
+        assert curves.tolerance.value == sig["tolerance"].default and curves.refine.value == sig["refine"].default
+        assert curves.refine_iters.value == sig["refine_iterations"].default
+        assert tuple(curves.method.options) == tuple(METHODS) and curves.method.value == sig["method"].default
+        assert page.tabs["Unsupervised"].pipeline.value == "default"
+    finally:
+        s.stop()

@@ -161,6 +161,9 @@ class RunPanel:
             (uplot.Series(label="iteration"), uplot.Series(label="log10 loss", stroke="#1c7ed6", width=2)),
             # log10 on a linear axis: uPlot's log axis labels small losses "0"
             title="Loss (log10)", scales={"x": {"time": False}}, aspect=1.6,
+            # shown from the first run on: an empty chart is nothing to look at, and the
+            # page's first paint skips the chart library's set-up (issue 13: interactive within 3 s)
+            visible=False,
         )
         self.clock = ui.add_markdown("")
         self.metrics = ui.add_markdown("")
@@ -184,6 +187,7 @@ class RunPanel:
         self.stop_event = threading.Event()
         self.losses, self.updates = [], 0
         self.bar.value, self.bar.animated = 0.0, True
+        self.curve.visible = True
         self.run.disabled, self.stop.disabled = True, False
         self.metrics.content = ""
         self.status.info("running ...")
