@@ -589,7 +589,8 @@ class Studio:
     def __init__(self, options: StudioOptions):
         self.options = options
         self.workdir = Workdir(options.workdir)
-        self.tabs = available_tabs()  # read from the sources: nothing is imported (see .choices)
+        self._tabs: list | None = None
+        self._tabs_lock = threading.Lock()
         self.ready = threading.Event()  # set once the tabs' capabilities are imported (_load)
         self.tab_errors: dict[str, str] = {}  # tab label -> why its capability did not import
         self.sessions: dict[int, Session] = {}
@@ -617,8 +618,21 @@ class Studio:
         self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
-        threading.Thread(target=choices.warm, name="nurbskit-studio-choices", daemon=True).start()
+        threading.Thread(target=self._read_choices, name="nurbskit-studio-choices", daemon=True).start()
         return self
+
+    @property
+    def tabs(self) -> list:
+        """The tabs whose capability exists (:func:`.registry.available_tabs`; read, not imported)."""
+        with self._tabs_lock:
+            if self._tabs is None:
+                self._tabs = available_tabs()
+            return self._tabs
+
+    def _read_choices(self) -> None:
+        """Read what the widgets offer while the browser fetches the page's code."""
+        assert self.tabs is not None  # read the capabilities' sources once, here
+        choices.warm()
 
     def load(self) -> "Studio":
         """Start importing the tabs' capabilities on a thread (once; :meth:`wait_ready` waits for it)."""
