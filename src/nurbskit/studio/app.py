@@ -33,6 +33,7 @@ from .workdir import Workdir, check_upload, too_large
 DEFAULT_MAX_UPLOAD = 200 * 1024 * 1024
 PROGRESS_INTERVAL = 0.1  # seconds between progress redraws (10 per second at most)
 HEARTBEAT = 0.25  # seconds between "still running" lines while no iteration reports
+IMPORT_WITHOUT_PAGE = 5.0  # seconds after start: the fitting code imports even if no page has come
 
 
 class Stopped(Exception):
@@ -596,10 +597,12 @@ class Studio:
         self.sessions: dict[int, Session] = {}
         self.server = None
         self._loader: threading.Thread | None = None
+        self._timer: threading.Timer | None = None
         self._lock = threading.Lock()
 
     def start(self) -> "Studio":
-        """Listen; the fitting code (torch, the capabilities) is imported once a page is up.
+        """Listen; the fitting code (torch, the capabilities) is imported once a page is up
+        (or a few seconds after start, when no page has come).
 
         A client that connects gets its widgets at once: they are built from plain data
         read from the library's sources (:mod:`.choices`, read on a thread while the
@@ -619,6 +622,10 @@ class Studio:
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         threading.Thread(target=self._read_choices, name="nurbskit-studio-choices", daemon=True).start()
+        # no page within a few seconds: import anyway, so that a page opened later finds it in
+        self._timer = threading.Timer(IMPORT_WITHOUT_PAGE, self.load)
+        self._timer.daemon = True
+        self._timer.start()
         return self
 
     @property
@@ -631,7 +638,7 @@ class Studio:
 
     def _read_choices(self) -> None:
         """Read what the widgets offer while the browser fetches the page's code."""
-        assert self.tabs is not None  # read the capabilities' sources once, here
+        self.tabs  # noqa: B018 - the property reads the capabilities' sources once, here
         choices.warm()
 
     def load(self) -> "Studio":
@@ -689,6 +696,8 @@ class Studio:
                     panel.stop_event.set()
 
     def stop(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
         if self.server is not None:
             self.server.stop()
             self.server = None
