@@ -23,6 +23,11 @@ Method:
   until it listens, until the page is interactive and until the fitting code is loaded,
   and the page's renderer process's (Chromium's ``Performance.getMetrics``
   ProcessTime) until interactive.
+  Peer, in the same run and interleaved with it (same load): the previous start-up order
+  (issue 13's earlier sessions) in this code, the capabilities imported from the moment
+  the server listens and a page's widgets built only once they are in (``IMPORT_FIRST``
+  patches ``Studio.start`` and ``Studio._connect`` in the spawned process); reported as a
+  ratio.
 * **Idle memory**: the resident set (``VmRSS`` of ``/proc/PID/status``) of that server
   process with one page connected, 2 s after the fitting code is loaded; the largest
   over the repeats.
@@ -84,10 +89,32 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def cold_start(browser, workdir: Path) -> dict:
+# The peer: the previous start-up order, in this version's code. The capabilities import
+# from the moment the server listens, and a page's widgets are built only once they are in.
+IMPORT_FIRST = """
+import sys
+from nurbskit.studio import app
+
+start, connect = app.Studio.start, app.Studio._connect
+
+def start_and_import(self):
+    return start(self).load()
+
+def connect_after_import(self, client):
+    self.ready.wait()
+    connect(self, client)
+
+app.Studio.start, app.Studio._connect = start_and_import, connect_after_import
+from nurbskit.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def cold_start(browser, workdir: Path, import_first: bool = False) -> dict:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    command = ["-c", IMPORT_FIRST] if import_first else ["-m", "nurbskit"]
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "nurbskit", "studio", "--port", "0", "--workdir", str(workdir)],
+    proc = subprocess.Popen([sys.executable, *command, "studio", "--port", "0", "--workdir", str(workdir)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     try:
         line = ""
@@ -190,7 +217,11 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        starts = [cold_start(browser, Path(tmp)) for _ in range(1 if args.quick else args.repeats)]
+        starts, peers = [], []
+        for _ in range(1 if args.quick else args.repeats):  # interleaved: both see the same load
+            starts.append(cold_start(browser, Path(tmp)))
+            peers.append(cold_start(browser, Path(tmp), import_first=True))
+        peer = statistics.median(s["interactive_s"] for s in peers)
         interactive = statistics.median(s["interactive_s"] for s in starts)
         serving = statistics.median(s["serving_s"] for s in starts)
         loaded = statistics.median(s["loaded_s"] for s in starts)
@@ -207,7 +238,11 @@ def main() -> None:
                          + " s (WebGL runs in Chromium's GPU process, not counted); fitting code loaded "
                          f"after {activated:.2f} s (runs " + ", ".join(f"{s['activated_s']:.2f}" for s in starts)
                          + "; server CPU time until then " + ", ".join(f"{s['cpu_activated_s']:.2f}" for s in starts)
-                         + " s)"})
+                         + f" s). Peer, interleaved: the previous order (capabilities imported from the start, "
+                         f"widgets built after them) {peer:.2f} s (runs "
+                         + ", ".join(f"{s['interactive_s']:.2f}" for s in peers) + "; server CPU until interactive "
+                         + ", ".join(f"{s['cpu_interactive_s']:.2f}" for s in peers)
+                         + f" s): this order takes {interactive / peer:.2f}x its time"})
         rows.append({"what": "idle studio memory (RSS, one page connected)", "goal": "< 400 MB",
                      "measured": rss, "unit": "MB", "detail": ", ".join(f"{s['idle_rss_mb']:.0f}" for s in starts)})
 
