@@ -163,7 +163,12 @@ def connect(browser, studio):
     end = time.monotonic() + 60
     while not (set(studio.sessions) - before) and time.monotonic() < end:
         time.sleep(0.05)
-    return page, studio.sessions[max(set(studio.sessions) - before)]
+    session = studio.sessions[max(set(studio.sessions) - before)]
+    # the capabilities import after the page is built: measure once they are in (the
+    # import would otherwise hold the interpreter during the first redraws)
+    while not session.active and time.monotonic() < end:
+        time.sleep(0.05)
+    return page, session
 
 
 def redraws(session, count: int, in_place: bool) -> dict:
