@@ -298,7 +298,7 @@ def fit_patches(
     cache: dict[tuple[int, int], _Region | None] = {}
     rejected: set[tuple[int, int]] = set()
     crease_log: dict[tuple[int, int], tuple[float, float, float]] = {}
-    counts = {"fits": 0, "candidates": 0, "accepted": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
+    counts = {"fits": 0, "candidates": 0, "accepted": 0, "seams": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
     next_id = s0
     while True:
         item = queue.pop()
@@ -313,6 +313,19 @@ def fit_patches(
             cand = cache[key]
             counts["retries"] += 1
         else:
+            # parts meeting at a steep seam cannot be one smooth patch, however a fit would
+            # round it: decided from the parts' own normals, before any fit
+            seam = seam_angle(a, b)
+            if seam > cfg.crease_seam:
+                cand = None
+                counts["seams"] += 1
+                crease_log[key] = (float("nan"), float("nan"), seam)
+                cache[key] = cand
+                record = {"a": a, "b": b, "priority": e, "energy_before": u, "seam_angle": seam,
+                          "accepted": False, "reason": "seam"}
+                history.append(record)
+                report("merge", counts["accepted"], s0 - 1)
+                continue
             members = np.concatenate([regions[a].members, regions[b].members])
             pf = fit_patch(x[members], eps, cfg, rng=rng)
             counts["fits"] += pf.fits
@@ -321,10 +334,8 @@ def fit_patches(
             part_normals = np.concatenate([regions[a].normals, regions[b].normals])
             tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
                                          model_normals=part_normals[ok], max_angle=cfg.crease_angle)
-            seam = seam_angle(a, b)
             crease_log[key] = (tight, turned, seam)
-            # parts meeting at a steep seam cannot be one smooth patch, however the fit rounds it
-            if seam > cfg.crease_seam or (tight > cfg.crease_fraction and turned > cfg.crease_turned):
+            if tight > cfg.crease_fraction and turned > cfg.crease_turned:
                 cand = None
                 counts["creases"] += 1
             else:
