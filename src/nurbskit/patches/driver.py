@@ -327,7 +327,9 @@ def fit_patches(
                 report("merge", counts["accepted"], s0 - 1)
                 continue
             members = np.concatenate([regions[a].members, regions[b].members])
-            pf = fit_patch(x[members], eps, cfg, rng=rng)
+            grids = [regions[r].surface.sizes for r in (a, b) if regions[r].surface is not None]
+            start_ctrl = tuple(np.max(grids, axis=0)) if grids else None
+            pf = fit_patch(x[members], eps, cfg, rng=rng, start_ctrl=start_ctrl)
             counts["fits"] += pf.fits
             counts["candidates"] += 1
             ok = pf.distance < eps

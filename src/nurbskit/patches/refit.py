@@ -209,7 +209,8 @@ def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg):
     return surface.detach(), topology, p.double().numpy(), dist.double().numpy()
 
 
-def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
+def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None,
+              start_ctrl: tuple[int, int] | None = None) -> PatchFit:
     """Fit one patch to ``points (M, 3)`` (input units; ``eps`` the inlier tolerance there).
 
     ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. The grid grows while
@@ -217,16 +218,22 @@ def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator |
     the distances the alternation's last foot points give). Then every point is projected
     once, warm-started at the foot point of its nearest subset point (a fitted subset point
     keeps its own), so Newton starts in the right basin and needs a few steps instead of a
-    search over a grid. Returns the patch with every point's foot parameters and true
-    distance.
+    search over a grid. ``start_ctrl``: the grid to start from (a union starts at its
+    parts' largest grid: a patch that grows by accretion does not climb the ladder from
+    ``min_ctrl`` again at every merge). Returns the patch with every point's foot
+    parameters and true distance.
     """
     rng = rng or np.random.default_rng(cfg.seed)
     pick = None if len(points) <= cfg.fit_points else rng.choice(len(points), cfg.fit_points, replace=False)
     sub = points if pick is None else points[pick]
     q = cfg.degree
     closed = bool(looks_closed(torch.as_tensor(sub))) and 2 * q + 2 <= cfg.max_ctrl
-    n_u = cfg.min_ctrl
-    n_v = max(cfg.min_ctrl, 2 * q + 2) if closed else cfg.min_ctrl
+    n_u = n_v = cfg.min_ctrl
+    if start_ctrl is not None:
+        n_u = min(cfg.max_ctrl, max(n_u, int(start_ctrl[0])))
+        n_v = min(cfg.max_ctrl, max(n_v, int(start_ctrl[1])))
+    if closed:
+        n_v = max(n_v, 2 * q + 2)
     best = None
     fits = 0
     while True:
