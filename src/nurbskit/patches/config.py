@@ -55,6 +55,11 @@ class PatchConfig:
         "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
         "normal of the merged part the point came from (a fillet cut into planar strips stays within normal_angle)",
     )
+    absorb: float = _f(
+        0.05,
+        "after the merges, a patch of at most this fraction of the points is dissolved into its neighbours (their "
+        "surfaces hold its points within eps, true projection) when the energy falls; 0: never",
+    )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
     fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
@@ -93,6 +98,8 @@ class PatchConfig:
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if not 0 <= self.absorb <= 1:
+            raise OptionError(f"absorb: expected a fraction of the points in [0, 1], got {self.absorb!r}")
         if not 0 <= self.crease_turned < 1:
             raise OptionError(f"crease_turned: expected a fraction in [0, 1), got {self.crease_turned!r}")
         if self.max_quadric_error < 0:
