@@ -61,7 +61,7 @@ class PatchConfig:
         "surfaces hold its points within eps, true projection) when the energy falls; 0: never",
     )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
-    fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
+    fit_rounds: int = _f(5, "alternating projection + least-squares rounds of each candidate fit (accepted patches are refined later)")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
