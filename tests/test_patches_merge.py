@@ -146,3 +146,18 @@ def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
     assert res.metrics["completeness"] == 100.0
     for patch in res.patches:  # each face keeps its own points and gains part of the strip
         assert set(labels[patch.inliers]) in ({0, 2}, {1, 2})
+
+
+def test_a_candidate_fit_reports_true_distances():
+    """fit_patch's distances (its union projected warm from the fitted subset's foot points)
+    match a cold projection from the grid (the core's search), point by point."""
+    from nurbskit.patches.refit import point_distances
+
+    rng = np.random.default_rng(5)
+    xy = rng.random((2000, 2))
+    p = np.c_[xy, 0.15 * np.sin(4 * xy[:, 0]) * xy[:, 1]]
+    pf = fit_patch(p, 0.01, Cfg(fit_points=400))
+    _, cold = point_distances(pf.surface, p)
+    assert pf.distance.shape == (2000,)
+    assert np.max(np.abs(pf.distance - cold)) < 1e-6
+    assert np.mean(pf.distance < 0.01) > 0.95  # and the fit is a fit
