@@ -60,6 +60,9 @@ class PatchConfig:
         "after the merges, a patch of at most this fraction of the points is dissolved into its neighbours (their "
         "surfaces hold its points within eps, true projection) when the energy falls; 0: never",
     )
+    absorb_held: float = _f(
+        0.5, "absorption needs the neighbours to hold at least this fraction of the small patch's points within eps"
+    )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
     fit_rounds: int = _f(5, "alternating projection + least-squares rounds of each candidate fit (accepted patches are refined later)")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
@@ -98,6 +101,8 @@ class PatchConfig:
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if not 0 <= self.absorb_held <= 1:
+            raise OptionError(f"absorb_held: expected a fraction in [0, 1], got {self.absorb_held!r}")
         if not 0 <= self.absorb <= 1:
             raise OptionError(f"absorb: expected a fraction of the points in [0, 1], got {self.absorb!r}")
         if not 0 <= self.crease_turned < 1:

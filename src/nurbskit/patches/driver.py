@@ -420,7 +420,8 @@ def fit_patches(
                 counts["refinements_kept"] = counts.get("refinements_kept", 0) + 1
         report("finalise", i + 1, len(final))
     # 5a. absorption: a small patch whose points its neighbours already fit (their surfaces
-    # extended to its points, true projection) is dissolved into them when the energy falls:
+    # extended to its points, true projection: at least absorb_held of them within eps) is
+    # dissolved into them when the energy falls:
     # a leftover strip at a sharp edge or a fillet's end costs a patch (simplicity) for
     # points the neighbours hold within eps anyway (fidelity, completeness); points no
     # neighbour holds become outliers (the outlier pass below may still place them).
@@ -444,7 +445,9 @@ def fit_patches(
             u_new, _ = energy(new_total, alive - 1, s0, n, cfg.weights)
             record = {"a": r, "b": -1, "absorbed_into": [int(c) for c in nbrs], "points": int(len(pts)),
                       "held": int(take.sum()), "energy_before": u, "energy_after": u_new}
-            if u_new < u:
+            # the neighbours must fit the patch (hold at least absorb_held of its points
+            # within eps), not merely make it cheaper to drop than to keep
+            if take.mean() >= cfg.absorb_held and u_new < u:
                 for c in nbrs:
                     sel = take & (best_c == c)
                     if sel.any():
