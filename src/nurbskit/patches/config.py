@@ -69,9 +69,10 @@ class PatchConfig:
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
     max_quadric_error: float = _f(
-        1.0,
+        0.0,
         "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "
-        "this many eps^2 (0: never skip); the paper's optional cut, here on by default: it keeps a cap off a tube",
+        "this many eps^2 (0: never skip, the default: a freeform union no quadric fits can still be one NURBS patch, "
+        "and the seam test keeps a cap off its tube); the paper's optional cut",
     )
     max_points: int = _f(
         20_000,
