@@ -32,8 +32,9 @@ def box_corner(tmp_path):
 
 def test_patches_writes_everything(box_corner, tmp_path, capsys):
     out = tmp_path / "out"
-    # --crease-seam 75 keeps the corner's sharp edges (the default 90 lets the energy round
-    # them, as the paper does: this sparse corner then becomes 2 patches)
+    # --crease-seam 75 (the default, given to test the option) keeps the corner's sharp
+    # edges; 90 lets the energy round them, as the paper does: this sparse corner then
+    # becomes 2 patches
     assert main(["patches", str(box_corner), "--out", str(out), "--quiet", "--crease-seam", "75"]) == 0
     text = capsys.readouterr().out
     assert "3 patches" in text and "IoU" in text

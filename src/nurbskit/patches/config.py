@@ -46,11 +46,11 @@ class PatchConfig:
         0.2, "a tight bend is a rounded crease when more than this fraction of it turns by more than crease_angle"
     )
     crease_seam: float = _f(
-        90.0,
+        75.0,
         "two parts never merge when they meet at more than this many degrees (median angle of their "
-        "normals across the kNN links joining them), decided before any fit; 90 (the default): never refused on "
-        "the angle alone, a merge across a sharp edge is judged by the energy and the crease test, as in the paper "
-        "(|N| on ABC); 75 keeps every sharp edge (more patches, fewer fits)",
+        "normals across the kNN links joining them), decided before any fit: sharp edges are kept; planar strips "
+        "of a fillet meet at less (about 2 x normal_angle); 90: never refused on the angle alone, a sharp edge is "
+        "judged by the energy and the crease test, as in the paper (fewer patches)",
     )
     crease_angle: float = _f(
         40.0,
