@@ -20,7 +20,7 @@ P_cov^o ceiling is estimated from the sampling density
 the true surface. There is no peer in ../shared/peers for this method (the paper's code
 needs CUDA and GoCoPP); the paper's own ABC averages are quoted for reference.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...] [--name RESULTS]``
+Run: ``PYTHONPATH=src python benchmarks/bench_patches.py [--only NAME ...] [--name RESULTS] [--set FIELD=VALUE ...]``
 (the scale rows ``cylinder_caps_100k`` and ``cylinder_caps_1m`` run only when named, each
 alone: their peak RSS is the process's)
 (``--merge A B`` combines the rows of separate runs into results/patches.*).
@@ -101,7 +101,13 @@ def main(argv=None) -> int:
     ap.add_argument("--name", default="patches", help="results file name (results/NAME.json, NAME.md)")
     ap.add_argument("--merge", nargs="*", default=None, metavar="NAME",
                     help="no runs: combine the rows of results/NAME.json files into results/patches.*")
+    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                    help="PatchConfig fields other than the defaults (e.g. crease_seam=90), recorded in the results")
     args = ap.parse_args(argv)
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides[key] = type(getattr(PatchConfig(), key))(value)
     torch.set_num_threads(1)
     if args.merge:
         import json
@@ -117,7 +123,7 @@ def main(argv=None) -> int:
     rows = []
     for name, kind, load in inputs(args.only):
         points, truth = load()
-        cfg = PatchConfig()
+        cfg = PatchConfig(**overrides)
         t0, c0 = time.perf_counter(), time.process_time()
         res = fit_patches(points, config=cfg, truth=truth)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -147,8 +153,10 @@ def main(argv=None) -> int:
         row["merge_s"], row["finalise_s"], row["other_s"] = s["merge"], s["finalise"], sum(s.values()) - s["merge"] - s["finalise"]
         row["stage_pct"] = {k: round(100 * v / max(sum(s.values()), 1e-9), 1) for k, v in s.items()}
         rows.append(row)
-        plot_labels(points, res.labels, figures / f"{name}.png", f"{name}: {m['N']} patches")
-        plot_labels(points, res.planar_labels, figures / f"{name}_planar.png", f"{name}: {res.planar['planes']} planes")
+        row["config"] = overrides
+        if not overrides:  # the figures show the defaults
+            plot_labels(points, res.labels, figures / f"{name}.png", f"{name}: {m['N']} patches")
+            plot_labels(points, res.planar_labels, figures / f"{name}_planar.png", f"{name}: {res.planar['planes']} planes")
         write_table(rows, args.name)  # after every file: a long run keeps what it measured
         print(f"{name}: N={m['N']} compl={m['completeness']:.1f} Pi={m['P_cov_i']:.1f} Po={m['P_cov_o']:.1f} "
               f"(ceiling {row['P_cov_o_ceiling']:.1f}) iou={row['iou']:.1f} {wall:.1f} s wall, {cpu:.1f} s cpu", flush=True)

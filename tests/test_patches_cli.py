@@ -32,7 +32,10 @@ def box_corner(tmp_path):
 
 def test_patches_writes_everything(box_corner, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["patches", str(box_corner), "--out", str(out), "--quiet"]) == 0
+    # --crease-seam 75 (the default, given to test the option) keeps the corner's sharp
+    # edges; 90 lets the energy round them, as the paper does: this sparse corner then
+    # becomes 2 patches
+    assert main(["patches", str(box_corner), "--out", str(out), "--quiet", "--crease-seam", "75"]) == 0
     text = capsys.readouterr().out
     assert "3 patches" in text and "IoU" in text
     for name in ("patches.json", "patches.ply", "labels.txt", "report.json", "config.json",
@@ -51,7 +54,7 @@ def test_patches_writes_everything(box_corner, tmp_path, capsys):
     mesh = read_mesh(out / "patches.ply")
     assert mesh.colors is not None and len(mesh.faces) > 0
     config = json.loads((out / "config.json").read_text())
-    assert config["eps"] == 0.01 and config["weights"] == [0.3, 0.4, 0.3]
+    assert config["eps"] == 0.01 and config["weights"] == [0.3, 0.4, 0.3] and config["crease_seam"] == 75
     # an existing output directory is not replaced without --overwrite
     assert main(["patches", str(box_corner), "--out", str(out), "--quiet"]) == 2
     assert "--overwrite" in capsys.readouterr().err

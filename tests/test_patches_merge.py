@@ -120,3 +120,44 @@ def test_a_fillet_cut_into_strips_merges_with_its_faces():
     # a strip of the fillet now shares a patch with a face
     assert any(set(patch.regions) & {2, 3} and set(patch.regions) & {0, 1} for patch in res.patches)
     assert res.metrics["P_cov_i"] > 99
+
+
+def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
+    """Two perpendicular faces and a 24-point strip along their edge, a region of its own.
+
+    No merge is allowed (``crease_seam`` of 10 degrees: the strip's plane meets both faces
+    at 45 degrees), so without absorption the strip stays a third patch; its points lie
+    within eps of both faces' surfaces, so dissolving it lowers the energy and keeps them
+    inliers.
+    """
+    rng = np.random.default_rng(4)
+    a, b, c = rng.random((600, 2)), rng.random((600, 2)), rng.random((24, 2))
+    p = np.vstack([np.c_[0.01 + 0.99 * a[:, 0], a[:, 1], np.zeros(600)],
+                   np.c_[np.zeros(600), b[:, 1], 0.01 + 0.99 * b[:, 0]],
+                   np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
+                            np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
+    labels = np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
+    kept = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, absorb=0), init_labels=labels)
+    res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10), init_labels=labels)
+    assert len(kept) == 3 and len(res) == 2
+    absorbed = [h for h in res.history if h.get("reason") == "absorb" and h["accepted"]]
+    assert len(absorbed) == 1 and absorbed[0]["a"] == 2 and absorbed[0]["held"] == 24
+    assert absorbed[0]["energy_after"] < absorbed[0]["energy_before"]
+    assert res.metrics["completeness"] == 100.0
+    for patch in res.patches:  # each face keeps its own points and gains part of the strip
+        assert set(labels[patch.inliers]) in ({0, 2}, {1, 2})
+
+
+def test_a_candidate_fit_reports_true_distances():
+    """fit_patch's distances (its union projected warm from the fitted subset's foot points)
+    match a cold projection from the grid (the core's search), point by point."""
+    from nurbskit.patches.refit import point_distances
+
+    rng = np.random.default_rng(5)
+    xy = rng.random((2000, 2))
+    p = np.c_[xy, 0.15 * np.sin(4 * xy[:, 0]) * xy[:, 1]]
+    pf = fit_patch(p, 0.01, Cfg(fit_points=400))
+    _, cold = point_distances(pf.surface, p)
+    assert pf.distance.shape == (2000,)
+    assert np.max(np.abs(pf.distance - cold)) < 1e-6
+    assert np.mean(pf.distance < 0.01) > 0.95  # and the fit is a fit

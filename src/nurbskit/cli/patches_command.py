@@ -46,6 +46,8 @@ def register(subparsers) -> None:
     p.add_argument("--sample", type=int, default=None, metavar="N",
                    help="INPUT is a mesh: fit N points sampled uniformly on its area instead of its vertices")
     p.add_argument("--max-points", type=int, default=20_000, metavar="N", help=_help("max_points") + " (default 20000)")
+    p.add_argument("--crease-seam", type=float, default=75.0, metavar="DEG",
+                   help=_help("crease_seam") + " (default 75)")
     p.add_argument("--seed", type=int, default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -124,7 +126,7 @@ def run_patches(args) -> int:
 
     parse_device(args.device)  # the one device parser: a device that exists here, or one line
     cfg = PatchConfig(eps=args.eps, weights=weights, max_ctrl=args.max_ctrl, seed=args.seed, device=args.device,
-                      init=args.init, max_points=args.max_points)
+                      init=args.init, max_points=args.max_points, crease_seam=args.crease_seam)
     try:
         cfg.validate()
     except OptionError as exc:

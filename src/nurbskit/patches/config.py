@@ -48,22 +48,33 @@ class PatchConfig:
     crease_seam: float = _f(
         75.0,
         "two parts never merge when they meet at more than this many degrees (median angle of their "
-        "normals across the kNN links joining them); planar strips of a fillet meet at less (about 2 x normal_angle)",
+        "normals across the kNN links joining them), decided before any fit: sharp edges are kept; planar strips "
+        "of a fillet meet at less (about 2 x normal_angle); 90: never refused on the angle alone, a sharp edge is "
+        "judged by the energy and the crease test, as in the paper (fewer patches)",
     )
     crease_angle: float = _f(
         40.0,
         "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
         "normal of the merged part the point came from (a fillet cut into planar strips stays within normal_angle)",
     )
+    absorb: float = _f(
+        0.05,
+        "after the merges, a patch of at most this fraction of the points is dissolved into its neighbours (their "
+        "surfaces hold its points within eps, true projection) when the energy falls; 0: never",
+    )
+    absorb_held: float = _f(
+        0.5, "absorption needs the neighbours to hold at least this fraction of the small patch's points within eps"
+    )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
-    fit_rounds: int = _f(8, "alternating projection + least-squares rounds of each candidate fit")
+    fit_rounds: int = _f(5, "alternating projection + least-squares rounds of each candidate fit (accepted patches are refined later)")
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
     max_quadric_error: float = _f(
-        1.0,
+        0.0,
         "skip merges whose Taubin quadric error (about the mean squared distance to the best quadric) exceeds "
-        "this many eps^2 (0: never skip); the paper's optional cut, here on by default: it keeps a cap off a tube",
+        "this many eps^2 (0: never skip, the default: a freeform union no quadric fits can still be one NURBS patch, "
+        "and the seam test keeps a cap off its tube); the paper's optional cut",
     )
     max_points: int = _f(
         20_000,
@@ -93,6 +104,10 @@ class PatchConfig:
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if not 0 <= self.absorb_held <= 1:
+            raise OptionError(f"absorb_held: expected a fraction in [0, 1], got {self.absorb_held!r}")
+        if not 0 <= self.absorb <= 1:
+            raise OptionError(f"absorb: expected a fraction of the points in [0, 1], got {self.absorb!r}")
         if not 0 <= self.crease_turned < 1:
             raise OptionError(f"crease_turned: expected a fraction in [0, 1), got {self.crease_turned!r}")
         if self.max_quadric_error < 0:

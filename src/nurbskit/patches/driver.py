@@ -298,7 +298,7 @@ def fit_patches(
     cache: dict[tuple[int, int], _Region | None] = {}
     rejected: set[tuple[int, int]] = set()
     crease_log: dict[tuple[int, int], tuple[float, float, float]] = {}
-    counts = {"fits": 0, "candidates": 0, "accepted": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
+    counts = {"fits": 0, "candidates": 0, "accepted": 0, "seams": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
     next_id = s0
     while True:
         item = queue.pop()
@@ -313,18 +313,31 @@ def fit_patches(
             cand = cache[key]
             counts["retries"] += 1
         else:
+            # parts meeting at a steep seam cannot be one smooth patch, however a fit would
+            # round it: decided from the parts' own normals, before any fit
+            seam = seam_angle(a, b)
+            if seam > cfg.crease_seam:
+                cand = None
+                counts["seams"] += 1
+                crease_log[key] = (float("nan"), float("nan"), seam)
+                cache[key] = cand
+                record = {"a": a, "b": b, "priority": e, "energy_before": u, "seam_angle": seam,
+                          "accepted": False, "reason": "seam"}
+                history.append(record)
+                report("merge", counts["accepted"], s0 - 1)
+                continue
             members = np.concatenate([regions[a].members, regions[b].members])
-            pf = fit_patch(x[members], eps, cfg, rng=rng)
+            grids = [regions[r].surface.sizes for r in (a, b) if regions[r].surface is not None]
+            start_ctrl = tuple(np.max(grids, axis=0)) if grids else None
+            pf = fit_patch(x[members], eps, cfg, rng=rng, start_ctrl=start_ctrl)
             counts["fits"] += pf.fits
             counts["candidates"] += 1
             ok = pf.distance < eps
             part_normals = np.concatenate([regions[a].normals, regions[b].normals])
             tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
                                          model_normals=part_normals[ok], max_angle=cfg.crease_angle)
-            seam = seam_angle(a, b)
             crease_log[key] = (tight, turned, seam)
-            # parts meeting at a steep seam cannot be one smooth patch, however the fit rounds it
-            if seam > cfg.crease_seam or (tight > cfg.crease_fraction and turned > cfg.crease_turned):
+            if tight > cfg.crease_fraction and turned > cfg.crease_turned:
                 cand = None
                 counts["creases"] += 1
             else:
@@ -406,6 +419,55 @@ def fit_patches(
                 total, u = _add(_add(total, before, -1), after), u_after
                 counts["refinements_kept"] = counts.get("refinements_kept", 0) + 1
         report("finalise", i + 1, len(final))
+    # 5a. absorption: a small patch whose points its neighbours already fit (their surfaces
+    # extended to its points, true projection: at least absorb_held of them within eps) is
+    # dissolved into them when the energy falls:
+    # a leftover strip at a sharp edge or a fillet's end costs a patch (simplicity) for
+    # points the neighbours hold within eps anyway (fidelity, completeness); points no
+    # neighbour holds become outliers (the outlier pass below may still place them).
+    if cfg.absorb:
+        for r in sorted(regions, key=lambda r: len(regions[r].members)):
+            reg = regions[r]
+            if len(reg.members) > cfg.absorb * n:
+                break
+            nbrs = [c for c in graph.get(r, {}) if c in regions and c != r]
+            if not nbrs:
+                continue
+            pts = x[reg.members]
+            best_d, best_c, best_p = np.full(len(pts), np.inf), np.full(len(pts), -1), np.zeros((len(pts), 2))
+            for c in nbrs:
+                p, d = point_distances(regions[c].surface, pts, regions[c].closed)
+                better = d < best_d
+                best_d[better], best_c[better], best_p[better] = d[better], c, p[better]
+            take = best_d < eps
+            gained = Contribution(int(take.sum()), float(best_d[take].sum() / eps))
+            new_total = _add(_add(total, reg.contribution(eps), -1), gained)
+            u_new, _ = energy(new_total, alive - 1, s0, n, cfg.weights)
+            record = {"a": r, "b": -1, "absorbed_into": [int(c) for c in nbrs], "points": int(len(pts)),
+                      "held": int(take.sum()), "energy_before": u, "energy_after": u_new}
+            # the neighbours must fit the patch (hold at least absorb_held of its points
+            # within eps), not merely make it cheaper to drop than to keep
+            if take.mean() >= cfg.absorb_held and u_new < u:
+                for c in nbrs:
+                    sel = take & (best_c == c)
+                    if sel.any():
+                        nc = regions[c]
+                        nc.members = np.concatenate([nc.members, reg.members[sel]])
+                        nc.distance = np.concatenate([nc.distance, best_d[sel]])
+                        nc.params = np.concatenate([nc.params, best_p[sel]])
+                        if nc.normals is not None:
+                            nc.normals = np.concatenate([nc.normals, surface_normals(nc.surface, best_p[sel])])
+                for c, k in graph.pop(r).items():  # the absorbed patch's neighbours now touch each other
+                    graph.get(c, {}).pop(r, None)
+                del regions[r]
+                total, u, alive = new_total, u_new, alive - 1
+                energies.append(u)
+                counts["absorbed"] = counts.get("absorbed", 0) + 1
+                record.update(accepted=True, reason="absorb")
+            else:
+                record.update(accepted=False, reason="absorb")
+            history.append(record)
+        final = sorted(regions, key=lambda r: -len(regions[r].members))
     owner = np.full(n, -1, dtype=np.int64)
     dist = np.full(n, np.inf)
     params = np.zeros((n, 2))

@@ -25,7 +25,8 @@ import torch
 
 from ..core import NURBSSurface
 from ..core.project import project_points
-from ..fit import SurfaceParameters, Target, Topology, alternate, fit_surface, get_pipeline, looks_closed, run_stage
+from ..fit import (SurfaceParameters, Target, Topology, alternate, fit_surface, get_pipeline, initial_surface, looks_closed,
+                   run_stage)
 from ..fit.init import plane_sheet
 
 
@@ -44,18 +45,22 @@ class PatchFit:
     topology: Topology = Topology()
 
 
-def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False, *,
+                    start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``.
 
     The core's projection (:func:`nurbskit.core.project.project_points`); on a patch closed
     in v its Newton steps cross the seam (``periodic=(False, True)``), so a point whose foot
-    point lies just across the seam does not stop on it.
+    point lies just across the seam does not stop on it. ``start (M, 2)``: warm-start
+    parameters (e.g. a nearby point's foot point): Newton starts there instead of at the
+    samples of a grid.
     """
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     x = torch.as_tensor(points, dtype=surface.dtype, device=surface.device)
+    warm = None if start is None else torch.as_tensor(start, dtype=surface.dtype, device=surface.device)
     with torch.no_grad():
-        proj = project_points(surface.detach(), x, periodic=(False, bool(closed_v)))
+        proj = project_points(surface.detach(), x, periodic=(False, bool(closed_v)), params=warm)
     return proj.params.cpu().double().numpy(), proj.distance.cpu().double().numpy()
 
 
@@ -105,6 +110,37 @@ def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
     return surface
 
 
+def _fit_lsq(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg):
+    """A candidate fit: the fit's own least-squares start and alternation, nothing else.
+
+    The same steps as :func:`nurbskit.fit.fit_surface` with no refinement iterations
+    (:func:`~nurbskit.fit.initial_surface`, then :func:`~nurbskit.fit.alternate`, in the
+    fit's units: centred, unit diagonal), called directly because the alternation's last
+    foot points give every fitted point's distance: no second projection of the subset.
+    Returns ``(surface, topology, params (M, 2), distance (M,))`` in input units.
+    """
+    if cfg.fit_iters:  # candidates with refinement iterations: the whole fit, then one projection
+        surface, topology = _fit_once(points, ctrl, closed, cfg)
+        params, dist = point_distances(surface, points, closed)
+        return surface, topology, params, dist
+    base = get_pipeline("default")
+    x = torch.as_tensor(points, dtype=torch.float64).to(cfg.device)
+    lo, hi = x.min(0).values, x.max(0).values
+    center, scale = (lo + hi) / 2, float((hi - lo).norm())
+    xn = (x - center) / scale
+    surface, topology = initial_surface(xn, base.init.kind, ctrl, (cfg.degree, cfg.degree), "v" if closed else "open",
+                                        base.init.smoothness)
+    surface, params, _ = alternate(surface, xn, cfg.fit_rounds, topology, base.alternation.smoothness,
+                                   base.alternation.tolerance)
+    with torch.no_grad():
+        if params is None:  # no rounds: project once
+            params = project_points(surface, xn, periodic=(False, topology.closed_v)).params
+        dist = (surface.evaluate(params) - xn).norm(dim=-1) * scale
+        surface = NURBSSurface(surface.control_points * scale + center, surface.degrees, surface.knot_vectors,
+                               surface.weights)
+    return (surface.detach().to(device="cpu"), topology, params.cpu().double().numpy(), dist.cpu().double().numpy())
+
+
 def _fit_once(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, iters: int | None = None):
     base = get_pipeline("default")
     fit_cfg = dataclasses.replace(
@@ -136,14 +172,15 @@ def wrap_axis(points: np.ndarray) -> np.ndarray:
     return v[:, 0]
 
 
-def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | None = None):
+def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg):
     """A patch closed in v around the cloud's own axis (:func:`wrap_axis`).
 
     The fit's cylinder start turns about the direction of largest spread, which is not
     the axis of a short, wide tube (a cap-less can): there the cloud is first stretched
     along its axis until that is the largest spread, fitted, and mapped back (NURBS are
     affine invariant, so the map moves control points only), then polished in true
-    distances by alternating projection and least squares.
+    distances by alternating projection and least squares. Returns what :func:`_fit_lsq`
+    returns.
     """
     axis = wrap_axis(points)
     c = points.mean(0)
@@ -153,51 +190,74 @@ def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg, iters: int | Non
     var_along, var_across = along.var(), np.linalg.eigvalsh(np.cov(across.T))[-1]
     stretch = max(1.0, 1.5 * np.sqrt(var_across / max(var_along, 1e-300)))
     if stretch == 1.0:
-        return _fit_once(points, ctrl, True, cfg, iters)
+        return _fit_lsq(points, ctrl, True, cfg)
     mapped = c + across + (stretch * along)[:, None] * axis
-    surface, topology = _fit_once(mapped, ctrl, True, cfg, iters)
+    surface, topology, params, dist = _fit_lsq(mapped, ctrl, True, cfg)
     cp = surface.control_points.detach().double()
     a = torch.as_tensor(axis)
     c_t = torch.as_tensor(c)
     h = (cp - c_t) @ a
     cp = cp - ((1.0 - 1.0 / stretch) * h)[..., None] * a
     surface = NURBSSurface(cp, surface.degrees, surface.knot_vectors, surface.weights)
+    x = torch.as_tensor(points, dtype=torch.float64)
     if cfg.fit_rounds:
-        surface, _, _ = alternate(surface, torch.as_tensor(points), cfg.fit_rounds, topology, 1e-3, 1e-3)
-    return surface.detach(), topology
+        surface, p, _ = alternate(surface, x, cfg.fit_rounds, topology, 1e-3, 1e-3)
+    else:
+        p = project_points(surface, x, periodic=(False, True)).params
+    with torch.no_grad():
+        dist = (surface.evaluate(p) - x).norm(dim=-1)
+    return surface.detach(), topology, p.double().numpy(), dist.double().numpy()
 
 
-def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None) -> PatchFit:
+def fit_patch(points: np.ndarray, eps: float, cfg, *, rng: np.random.Generator | None = None,
+              start_ctrl: tuple[int, int] | None = None) -> PatchFit:
     """Fit one patch to ``points (M, 3)`` (input units; ``eps`` the inlier tolerance there).
 
     ``cfg`` is a :class:`~nurbskit.patches.config.PatchConfig`. The grid grows while
-    fewer than 95 % of the fitted subset lie within ``eps / 2`` (decided on the subset;
-    every point is projected once at the end). Returns the patch with every point's foot
+    fewer than 95 % of the fitted subset lie within ``eps / 2`` (decided on the subset, with
+    the distances the alternation's last foot points give). Then every point is projected
+    once, warm-started at the foot point of its nearest subset point (a fitted subset point
+    keeps its own), so Newton starts in the right basin and needs a few steps instead of a
+    search over a grid. ``start_ctrl``: the grid to start from (a union starts at its
+    parts' largest grid: a patch that grows by accretion does not climb the ladder from
+    ``min_ctrl`` again at every merge). Returns the patch with every point's foot
     parameters and true distance.
     """
     rng = rng or np.random.default_rng(cfg.seed)
-    sub = points if len(points) <= cfg.fit_points else points[rng.choice(len(points), cfg.fit_points, replace=False)]
+    pick = None if len(points) <= cfg.fit_points else rng.choice(len(points), cfg.fit_points, replace=False)
+    sub = points if pick is None else points[pick]
     q = cfg.degree
     closed = bool(looks_closed(torch.as_tensor(sub))) and 2 * q + 2 <= cfg.max_ctrl
-    n_u = cfg.min_ctrl
-    n_v = max(cfg.min_ctrl, 2 * q + 2) if closed else cfg.min_ctrl
+    n_u = n_v = cfg.min_ctrl
+    if start_ctrl is not None:
+        n_u = min(cfg.max_ctrl, max(n_u, int(start_ctrl[0])))
+        n_v = min(cfg.max_ctrl, max(n_v, int(start_ctrl[1])))
+    if closed:
+        n_v = max(n_v, 2 * q + 2)
     best = None
     fits = 0
     while True:
-        surface, topology = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_once(sub, (n_u, n_v), False, cfg)
+        surface, topology, sub_params, sub_dist = _fit_closed(sub, (n_u, n_v), cfg) if closed else _fit_lsq(
+            sub, (n_u, n_v), False, cfg)
         fits += 1
-        _, dist = point_distances(surface, sub, closed)
-        good = float(np.mean(dist < eps / 2))
+        good = float(np.mean(sub_dist < eps / 2))
         if best is None or good > best[0] + 0.005:
-            best = (good, surface, (n_u, n_v), topology)
+            best = (good, surface, (n_u, n_v), topology, sub_params)
         else:
             break  # a larger grid no longer helps
         if good >= 0.95 or (n_u >= cfg.max_ctrl and n_v >= cfg.max_ctrl):
             break
         n_u = min(cfg.max_ctrl, int(np.ceil(n_u * 1.5)))
         n_v = min(cfg.max_ctrl, int(np.ceil(n_v * 1.5)))
-    _, surface, ctrl, topology = best
-    params, dist = point_distances(surface, points, closed)
+    _, surface, ctrl, topology, sub_params = best
+    if pick is None:
+        start = sub_params
+    else:
+        from ..core.neighbors import kdtree
+
+        _, near = kdtree(sub).query(points, k=1)
+        start = sub_params[near]
+    params, dist = point_distances(surface, points, closed, start=start)
     return PatchFit(surface, closed, params, dist, ctrl, fits, topology)
 
 
