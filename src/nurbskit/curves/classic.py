@@ -45,6 +45,9 @@ _STROKE_SIGMA = 1.0
 _MERGE = 5.0
 # ... as long as the merged cluster spans at most this many times that distance.
 _SPAN = 1.0
+# Stroke widths above this (pixels) count as this for merging junctions and dropping short
+# strokes: thick strokes (a digit upsampled) would merge every junction of the drawing.
+_THICK = 4.0
 # Branch directions at a junction are read over this many stroke widths of skeleton.
 _REACH = 2.0
 
@@ -405,14 +408,22 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set]:
     return partner, tips
 
 
+def _arc_length(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
 def _min_length(width: float) -> float:
     """The shortest stroke kept (pixels): shorter pieces are left between junctions and
     loose ends; 3 stroke widths + 4 px, the width capped at 4 px for thick strokes."""
-    return 2.0 * min(width, 4.0) + 4.0
+    return 2.0 * min(width, _THICK) + 4.0
 
 
-def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.ndarray], float]:
-    """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width."""
+def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True) -> tuple[list[np.ndarray], float]:
+    """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width.
+
+    ``simplify=False`` keeps every junction and spur of the skeleton (no merging, no
+    pruning): the fallback for blobs whose strokes are as wide as the drawing is long.
+    """
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
@@ -445,14 +456,15 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
     # Shortest edges first, and a merge only while the whole cluster stays within the
     # merging distance: chained merges would make one "junction" of crossings far apart
     # and pair branches across it.
-    limit = max(3.0, _MERGE * width)
+    limit = max(3.0, _MERGE * min(width, _THICK))
     centre = [np.mean(np.asarray(nd, dtype=float), axis=0) for nd in nodes]
     members = {k: [k] for k in range(len(nodes))}
     kept, merged = [], set()
     order = sorted(range(len(edges)), key=lambda x: length(edges[x][2]))
     for x in order:
         a, b, path = edges[x]
-        if not (a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b] and length(path) < limit):
+        if not (simplify and a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b]
+                and length(path) < limit):
             continue
         ra, rb = find(a), find(b)
         if ra == rb:
@@ -480,7 +492,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
             end, root = (path[0], path[-1]) if degree[ra] == 1 else (path[-1], path[0])
             # (Short branches of thin strokes, a few pixels, are spurs whatever their reach.)
             spur = length(path) < 6.0 or length(path) + dt[end] < 2.0 * dt[root] + 1.0
-        if not spur:
+        if not spur or not simplify:
             pruned.append((ra, rb, path))
     edges = pruned
 
@@ -795,7 +807,7 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         tolerance: largest distance in pixels from a stroke's skeleton pixels to its curve.
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
-            3 stroke widths + 4 px, the width taken at most 4 px).
+            2 stroke widths + 4 px, the width taken at most 4 px).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
@@ -804,6 +816,14 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
     strokes, width = trace_strokes(ink)
     if min_length is None:
         min_length = _min_length(width)
+    if not any(_arc_length(st) >= min_length for st in strokes):
+        # Strokes as wide as the drawing is long (a digit upsampled from 8 x 8): merging
+        # junctions and pruning spurs left nothing long enough. The raw skeleton's longest
+        # strokes are better than no curve.
+        strokes, width = trace_strokes(ink, width, simplify=False)
+        longest = max((_arc_length(st) for st in strokes), default=0.0)
+        if longest >= 2.0 * width + 4.0:  # still a stroke, not a dot
+            min_length = min(min_length, 0.5 * longest)
     curves = []
     for s in strokes:
         if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
