@@ -43,6 +43,13 @@ _SMOOTH = 1e-2
 _STROKE_SIGMA = 1.0
 # Junctions joined by an edge shorter than this many stroke widths are one junction.
 _MERGE = 5.0
+# ... as long as the merged cluster spans at most this many times that distance.
+_SPAN = 1.0
+# Stroke widths above this (pixels) count as this for merging junctions and dropping short
+# strokes: thick strokes (a digit upsampled) would merge every junction of the drawing.
+_THICK = 4.0
+# Branch directions at a junction are read over this many stroke widths of skeleton.
+_REACH = 2.0
 
 # The 8 neighbours of a pixel, as (drow, dcol).
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
@@ -180,12 +187,18 @@ def _graph(skel: np.ndarray):
 
 
 def _direction(pixels: list, reach: int) -> np.ndarray:
-    """Unit direction leaving the first pixel of ``pixels`` along the chain (x, y)."""
-    a = np.array(pixels[0], dtype=float)
-    b = np.array(pixels[min(reach, len(pixels) - 1)], dtype=float)
-    d = (b - a)[::-1]
-    n = np.linalg.norm(d)
-    return d / n if n > 0 else d
+    """Unit direction (x, y) of the chain ``pixels (row, col)`` leaving its first pixel.
+
+    The principal axis (least-squares line, by SVD) of the first ``reach + 1`` pixels,
+    oriented away from the first: less sensitive to the skeleton's one-pixel staircase
+    than the chord to a single pixel.
+    """
+    p = np.asarray(pixels[: reach + 1], dtype=float)[:, ::-1]
+    if len(p) < 2:
+        return np.zeros(2)
+    _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
+    d = vt[0]
+    return -d if d @ (p[-1] - p[0]) < 0 else d
 
 
 # Holes in the ink at most this deep (pixels from their edge to their middle) are filled.
@@ -226,7 +239,53 @@ _PARALLEL = 0.0
 _OPPOSITE = -0.2
 
 
-def _pair_ends(edges: list, reach: int) -> tuple[dict, set]:
+# Junctions with more branch ends than this are paired greedily (the exact matching
+# enumerates (n - 1)!! pairings).
+_EXACT_ENDS = 10
+
+
+def _least_turning(ends: list, cos) -> list:
+    """Pairs of ``ends`` meeting at one junction, the total turning through it least.
+
+    Each curve through a junction enters along one branch and leaves along another, so
+    the branches pair up: a minimum-weight perfect matching of the ends, the weight of a
+    pair its turning angle ``arccos(-cos)`` (0 straight through, pi for a reversal;
+    ``cos(e, f)`` the cosine between the two ends' directions, both pointing away from
+    the junction). With an odd count one end stays alone: a curve ends there (a "T": a
+    stroke ending on another curve). The two ends of one edge (a loop) are not paired
+    with each other when other ends are there: a curve crossing itself continues through
+    its crossing. Exhaustive over the (n - 1)!! matchings up to ``_EXACT_ENDS`` ends
+    (945 for 10), most nearly straight pairs first beyond.
+    """
+    def turn(e, f):
+        if e[0] == f[0] and len(ends) > 2:
+            return 10.0  # a loop closed on itself at a crossing: last resort
+        return float(np.arccos(np.clip(-cos(e, f), -1.0, 1.0)))
+
+    if len(ends) > _EXACT_ENDS:
+        out, used = [], set()
+        for _, e, f in sorted((turn(e, f), e, f) for x, e in enumerate(ends) for f in ends[x + 1:]):
+            if e not in used and f not in used:
+                used.update((e, f))
+                out.append((e, f))
+        return out
+
+    def best(rest):
+        """(cost, pairs) of the best matching of ``rest`` (one end left alone when odd)."""
+        if len(rest) < 2:
+            return 0.0, []
+        if len(rest) % 2:  # try each end as the one left alone
+            return min((best(rest[:i] + rest[i + 1:]) for i in range(len(rest))), key=lambda t: t[0])
+        e, options = rest[0], []
+        for i in range(1, len(rest)):
+            cost, pairs = best(rest[1:i] + rest[i + 1:])
+            options.append((cost + turn(e, rest[i]), [(e, rest[i])] + pairs))
+        return min(options, key=lambda t: t[0])
+
+    return best(list(ends))[1]
+
+
+def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set]:
     """Which edge continues which through each node of the stroke graph (good continuation).
 
     ``edges`` is a list of ``(a, b, pixels)`` (node ids, ``-1`` for none; ``pixels`` from
@@ -283,6 +342,13 @@ def _pair_ends(edges: list, reach: int) -> tuple[dict, set]:
             return f, g
         return None
 
+    def stubby(end):
+        o = other(end)
+        if o < 0 or len(at.get(o, [])) != 1:
+            return False
+        path = np.asarray(edges[end[0]][2], dtype=float)
+        return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) < stub
+
     partner, tips, done = {}, set(), set()
 
     def link(e, f):
@@ -333,20 +399,31 @@ def _pair_ends(edges: list, reach: int) -> tuple[dict, set]:
         if len(ends) == 2 and ends[0][0] != ends[1][0]:
             link(*ends)  # a pruned spur or a corner: the stroke passes through
             continue
-        pairs = sorted((cos(e, f), e, f) for x, e in enumerate(ends) for f in ends[x + 1:] if e[0] != f[0])
-        for c, e, f in pairs:
-            if e not in partner and f not in partner and c <= _STRAIGHT:
-                link(e, f)
-        # A loop's ends continue into any branches left (a curl: the curve crosses itself).
-        for c, e, f in pairs:
-            loop = edges[e[0]][0] == edges[e[0]][1] or edges[f[0]][0] == edges[f[0]][1]
-            if loop and e not in partner and f not in partner:
-                link(e, f)
+        # Dead ends shorter than ``stub`` (the shortest stroke kept) stay out of the
+        # pairing: a spur the pruning missed, or a curve's end overhanging a crossing by a
+        # few pixels, would otherwise leave a real branch alone and split its curve.
+        live = [e for e in ends if not stubby(e)]
+        for e, f in _least_turning(live if len(live) >= 2 else ends, cos):
+            link(e, f)
     return partner, tips
 
 
-def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.ndarray], float]:
-    """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width."""
+def _arc_length(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
+def _min_length(width: float) -> float:
+    """The shortest stroke kept (pixels): shorter pieces are left between junctions and
+    loose ends; 3 stroke widths + 4 px, the width capped at 4 px for thick strokes."""
+    return 2.0 * min(width, _THICK) + 4.0
+
+
+def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True) -> tuple[list[np.ndarray], float]:
+    """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width.
+
+    ``simplify=False`` keeps every junction and spur of the skeleton (no merging, no
+    pruning): the fallback for blobs whose strokes are as wide as the drawing is long.
+    """
     from scipy import ndimage
     from skimage.morphology import skeletonize
 
@@ -376,13 +453,29 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
         return k
 
     is_junction = [len(nodes[k]) > 1 or sum(1 for _ in _neighbours(skel, *nodes[k][0])) >= 3 for k in range(len(nodes))]
-    kept = []
-    for a, b, path in edges:
-        if (a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b]
-                and length(path) < max(3.0, _MERGE * width)):
-            parent[find(a)] = find(b)
+    # Shortest edges first, and a merge only while the whole cluster stays within the
+    # merging distance: chained merges would make one "junction" of crossings far apart
+    # and pair branches across it.
+    limit = max(3.0, _MERGE * min(width, _THICK))
+    centre = [np.mean(np.asarray(nd, dtype=float), axis=0) for nd in nodes]
+    members = {k: [k] for k in range(len(nodes))}
+    kept, merged = [], set()
+    order = sorted(range(len(edges)), key=lambda x: length(edges[x][2]))
+    for x in order:
+        a, b, path = edges[x]
+        if not (simplify and a >= 0 and b >= 0 and a != b and is_junction[a] and is_junction[b]
+                and length(path) < limit):
             continue
-        kept.append((a, b, path))
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            merged.add(x)
+            continue
+        span = max(float(np.linalg.norm(centre[i] - centre[j])) for i in members[ra] for j in members[rb])
+        if span <= _SPAN * limit:
+            parent[ra] = rb
+            members[rb] += members.pop(ra)
+            merged.add(x)
+    kept = [e for x, e in enumerate(edges) if x not in merged]
     degree = {}
     for a, b, _ in kept:
         for k in (a, b):
@@ -399,11 +492,11 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
             end, root = (path[0], path[-1]) if degree[ra] == 1 else (path[-1], path[0])
             # (Short branches of thin strokes, a few pixels, are spurs whatever their reach.)
             spur = length(path) < 6.0 or length(path) + dt[end] < 2.0 * dt[root] + 1.0
-        if not spur:
+        if not spur or not simplify:
             pruned.append((ra, rb, path))
     edges = pruned
 
-    partner, tips = _pair_ends(edges, int(max(4, 2 * width)))
+    partner, tips = _pair_ends(edges, int(max(4, _REACH * width)), _min_length(width))
 
     # Chain edges into strokes.
     used, strokes = set(), []
@@ -448,7 +541,105 @@ def trace_strokes(ink: np.ndarray, width: float | None = None) -> tuple[list[np.
         pts = pts[keep]
         if len(pts) >= 2:
             out.append(pts)
+    out = _join_broken(out, width)
     return out, width
+
+
+# Two stroke ends this close (stroke widths, plus 2 px) that continue each other are joined.
+_GAP = 2.0
+# ... when the turn from one into the other is at most this (cosine of 45 degrees).
+_CONTINUES = 0.7
+
+
+def _end(stroke: np.ndarray, side: int, reach: float):
+    """The end point of ``stroke (n, 2)`` at ``side`` (0: first, 1: last) and its outward unit direction."""
+    s = stroke if side == 1 else stroke[::-1]
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(s[::-1], axis=0), axis=1))])
+    back = s[::-1][min(int(np.searchsorted(arc, reach)), len(s) - 1)]
+    d = s[-1] - back
+    n = np.linalg.norm(d)
+    return s[-1], (d / n if n > 0 else d)
+
+
+def _join_broken(strokes: list, width: float) -> list:
+    """Strokes joined end to end where one continues the other across a small gap.
+
+    Pairing at a junction cluster can leave a curve's two sides apart (the branch it
+    should have continued into was taken by another curve); their ends then face each
+    other a stroke width or two apart. Two ends of different strokes within
+    ``_GAP * width + 2`` px whose outward directions are nearly opposite, and whose gap
+    runs along them, are joined, the most nearly straight joins first (good continuation).
+    """
+    strokes = [np.asarray(s) for s in strokes]
+    if len(strokes) < 2:
+        return strokes
+    reach = max(4.0, 2.0 * width)
+    gap_max = _GAP * width + 2.0
+    ends = {}
+    for i, st in enumerate(strokes):
+        if len(st) > 3 and np.all(st[0] == st[-1]):
+            continue  # closed
+        for side in (0, 1):
+            ends[(i, side)] = _end(st, side, reach)
+    keys = list(ends)
+    pts = np.array([ends[k][0] for k in keys])
+    tree = cKDTree(pts)
+    options = []
+    for x, y in tree.query_pairs(gap_max):
+        (i, si), (j, sj) = keys[x], keys[y]
+        if i == j:
+            continue
+        (p, dp), (q, dq) = ends[keys[x]], ends[keys[y]]
+        turn = -float(dp @ dq)
+        g = q - p
+        gn = float(np.linalg.norm(g))
+        along = 1.0 if gn < 1.0 else min(float(dp @ g) / gn, -float(dq @ g) / gn)
+        if turn >= _CONTINUES and along >= _CONTINUES:
+            options.append((-(turn + along), keys[x], keys[y]))
+    if not options:
+        return strokes
+    # Union of chains: each stroke end used once.
+    options.sort(key=lambda t: t[0])
+    link, used = {}, set()
+    for _, e, f in options:
+        if e in used or f in used:
+            continue
+        # Refuse a join that closes a chain on itself.
+        a, seen = e[0], {e[0]}
+        cur = (f[0], 1 - f[1])
+        ok = True
+        while cur in link:
+            nxt = link[cur]
+            if nxt[0] == a:
+                ok = False
+                break
+            cur = (nxt[0], 1 - nxt[1])
+        if not ok:
+            continue
+        link[e], link[f] = f, e
+        used.update((e, f))
+    out, done = [], set()
+    for i in range(len(strokes)):
+        if i in done:
+            continue
+        # Walk to one end of the chain, then along it.
+        side, cur = 0, i
+        seen = {i}
+        while (cur, side) in link and link[(cur, side)][0] not in seen:
+            cur, side = link[(cur, side)][0], 1 - link[(cur, side)][1]
+            seen.add(cur)
+        # cur's `side` end is free (or the chain loops): walk from it.
+        parts, s_, c_ = [], side, cur
+        while True:
+            done.add(c_)
+            st = strokes[c_]
+            parts.append(st if s_ == 0 else st[::-1])
+            nxt = link.get((c_, 1 - s_))
+            if nxt is None or nxt[0] in done:
+                break
+            c_, s_ = nxt
+        out.append(np.concatenate(parts))
+    return out
 
 
 def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_ctrl: int | None = None,
@@ -616,15 +807,23 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         tolerance: largest distance in pixels from a stroke's skeleton pixels to its curve.
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
-            3 stroke widths + 4 px, the width taken at most 4 px).
+            2 stroke widths + 4 px, the width taken at most 4 px).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
     strokes, width = trace_strokes(ink)
-    if min_length is None:  # pieces left between junctions and loose ends; capped for thick strokes
-        min_length = 3.0 * min(width, 4.0) + 4.0
+    if min_length is None:
+        min_length = _min_length(width)
+    if not any(_arc_length(st) >= min_length for st in strokes):
+        # Strokes as wide as the drawing is long (a digit upsampled from 8 x 8): merging
+        # junctions and pruning spurs left nothing long enough. The raw skeleton's longest
+        # strokes are better than no curve.
+        strokes, width = trace_strokes(ink, width, simplify=False)
+        longest = max((_arc_length(st) for st in strokes), default=0.0)
+        if longest >= 2.0 * width + 4.0:  # still a stroke, not a dot
+            min_length = min(min_length, 0.5 * longest)
     curves = []
     for s in strokes:
         if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
