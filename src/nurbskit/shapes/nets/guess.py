@@ -8,8 +8,8 @@ Canonicalisation (how a world cloud is put in the frame the networks were traine
    (:func:`nurbskit.shapes.normals.estimate_normals`, then
    :func:`nurbskit.shapes.axis.revolution_axis` (line geometry) or
    :func:`~nurbskit.shapes.axis.extrusion_direction`, :data:`AXIS_ITERATIONS` robust
-   rounds): about 4 ms of one CPU thread, a median error of 0.4-0.6 degree on the
-   benchmark's clouds. When that estimate is ambiguous (its ``spread`` above
+   rounds): a few milliseconds of one CPU thread, a median error of 0.4-0.7 degree on
+   the benchmark's clouds. When that estimate is ambiguous (its ``spread`` above
    :data:`SPREAD_LIMIT`: a sphere's axis, a plane's direction) the network's own search
    below runs instead;
 3. ``direction="search"``: analysis by synthesis, the network alone: for each candidate
@@ -32,7 +32,8 @@ Convention: the returned dict follows the network initialiser contract of
 the axis (revolution) or in ``(x, y)`` along ``plane_basis(axis_direction)`` from
 ``axis_point`` (extrusion), ``extent (t0, t1)`` for an extrusion, plus ``frame``
 (``origin``, ``e1``, ``e2``: the profile plane's 3-D unit vectors), ``chamfer`` (the
-winner's Chamfer distance in the normalised frame), ``weights`` (the model's name) and
+Chamfer distance of the generated surface in the normalised frame, with ``score=True``;
+None otherwise), ``weights`` (the model's name) and
 ``direction_from`` (``"normals"`` or ``"search"``: which step found the direction).
 """
 
@@ -57,7 +58,7 @@ __all__ = ["DIRECTIONS", "initial_guess", "guess_surface", "load_model", "plane_
 
 MAX_POINTS = 1024  # points of the final prediction (an even stride through the cloud); the max pool is count-free
 SEARCH_POINTS = 160  # points per candidate direction in the search
-AXIS_POINTS = 500  # points of the normals-based direction (an even subsample)
+AXIS_POINTS = 400  # points of the normals-based direction (an even subsample)
 AXIS_NEIGHBOURS = {"revolution": 16, "extrusion": 24}  # k of the normals on that subsample
 AXIS_ITERATIONS = 3  # robust rounds of the line-geometry / direction fit
 SPREAD_LIMIT = 0.25  # a normals estimate with a larger spread is ambiguous: search instead
@@ -201,7 +202,8 @@ def _search_direction(model, rel: Tensor) -> Tensor:
     return d
 
 
-def initial_guess(points, kind: str, *, weights: str | None = None, direction: str = "normals") -> dict:
+def initial_guess(points, kind: str, *, weights: str | None = None, direction: str = "normals",
+                  score: bool = False) -> dict:
     """The trained network's surface of ``kind`` for a world cloud ``points (N, 3)``.
 
     The direction (axis or extrusion direction) comes from normals
@@ -217,6 +219,9 @@ def initial_guess(points, kind: str, *, weights: str | None = None, direction: s
         kind: 'revolution' or 'extrusion'.
         weights: a weights file instead of the shipped ``shapes_<kind>_points``.
         direction: 'normals' (default) or 'search'.
+        score: also compute ``chamfer`` (the training loss between :data:`SEARCH_POINTS` of
+            the points and the generated surface, in the normalised frame; about 1 ms, so
+            off by default: ``chamfer`` is then None).
 
     Returns:
         the contract's dict (module docstring). Raises InputError for bad points,
@@ -244,15 +249,15 @@ def initial_guess(points, kind: str, *, weights: str | None = None, direction: s
         d = _search_direction(model, rel)
     frame = _frames(d[None])[0]
     with torch.no_grad():
-        # the profile from up to MAX_POINTS points; its Chamfer (the score of the search) on
-        # SEARCH_POINTS of them: the neighbour search would cost more than the network
         x = (rel[:: max(1, -(-rel.shape[0] // MAX_POINTS))] @ frame.T).to(torch.float32)
         coords = model(x[None])
-        check = (rel[:: max(1, -(-rel.shape[0] // SEARCH_POINTS))] @ frame.T).to(torch.float32)
-        chamfer = _chamfer(check[None], model.surface_points(coords))
+        chamfer = None
+        if score:  # on SEARCH_POINTS of them: the neighbour search costs more than the network
+            check = (rel[:: max(1, -(-rel.shape[0] // SEARCH_POINTS))] @ frame.T).to(torch.float32)
+            chamfer = float(_chamfer(check[None], model.surface_points(coords))[0])
     c = coords[0].to(torch.float64)
     prof = c[: 2 * N_CTRL].reshape(N_CTRL, 2) * scale
-    out = {"axis_point": centre.clone(), "axis_direction": frame[2].clone(), "chamfer": float(chamfer[0]),
+    out = {"axis_point": centre.clone(), "axis_direction": frame[2].clone(), "chamfer": chamfer,
            "weights": model_name(kind, "points"), "direction_from": found}
     # the frame's e1 is the contract's plane_basis(d) rule (see _frames), so the profile needs no turn;
     # a revolution's profile is (r, z) whatever e1 is: the network knows full turns only, the fitter
