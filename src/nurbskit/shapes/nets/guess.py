@@ -21,7 +21,7 @@ Canonicalisation (how a world cloud is put in the frame the networks were traine
    (measured on the benchmark's vases: the nearest eigenvector is 13 degrees off the axis
    at the median). Candidates: the three principal directions and 30 directions over the
    hemisphere (about 25 degrees apart), then rings of 6 at 8, 3 and 1 degrees around the
-   best so far (54 network evaluations on a subsample, in batches): about 15 times the
+   best so far (54 network evaluations on a subsample, in batches): about ten times the
    time of step 2, for a 1-2 degree axis;
 4. the profile is predicted at the chosen direction from up to :data:`MAX_POINTS` points;
 5. the winner is mapped back: axis point = the centroid, lengths times the scale.
