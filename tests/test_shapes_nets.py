@@ -179,24 +179,63 @@ def test_the_points_revolution_model_is_shipped():
     assert ("revolution", "points") in SHIPPED
 
 
+def _fixed_batch() -> dict:
+    """The fixed-batch numbers benchmarks/bench_shapes_nets.py computed and recorded."""
+    return json.loads(RESULTS.read_text())["meta"]["fixed_batch"]
+
+
 @pytest.mark.parametrize("kind,input", SHIPPED)
-def test_shipped_weights_predict_within_the_benchmarked_error(kind, input):
-    """Bound: the mean input-to-surface distance (% of the diagonal) that
-    benchmarks/bench_shapes_nets.py measured for this model on 100 held-out canonical clouds
-    (results/shapes_nets.json, row "network, canonical"), times 1.5: this fixed batch has 8
-    clouds (a noisier mean), 600 points, noise drawn in [0, 0.5 %]. Same metric: true
-    projection onto the exact surface (nurbskit.metrics.surface_distances)."""
+def test_shipped_weights_reproduce_the_benchmarks_fixed_batch(kind, input):
+    """The shipped model on the benchmark's fixed batch (8 canonical clouds, 600 points, noise
+    drawn in [0, 0.5 %]) gives the mean input-to-surface distance (% of the diagonal, true
+    projection: nurbskit.metrics.surface_distances) that bench_shapes_nets.py recorded
+    (results/shapes_nets.json, meta.fixed_batch), to float32 rounding: the weights and the
+    forward are the benchmarked ones. It is also within 2 % of the diagonal (the issue's goal)."""
     from nurbskit.metrics import surface_distances
 
-    rows = json.loads(RESULTS.read_text())["rows"]
-    measured = next(r for r in rows if r["model"] == model_name(kind, input) and r["method"] == "network, canonical")
+    want = _fixed_batch()["canonical"][model_name(kind, input)]
     model = load_model(kind, input)
     batch = make_batch(batch_generator(123, 0), 8, kind, 600, images=input == "image", max_noise=0.005)
     with torch.no_grad():
         coords = model(batch["images"] if input == "image" else batch["points"]).double()
     means = [surface_distances(exact_surface(kind, coords[b]), batch["points"][b].double(), 32)["to_surface_mean"]
              for b in range(8)]
-    assert 100 * sum(means) / 8 < 1.5 * measured["to_surface_mean_pct"]
+    got = 100 * sum(means) / 8
+    assert_close(torch.tensor(got, dtype=F64), torch.tensor(want, dtype=F64), atol=1e-4 * want)
+    assert got < 2.0
+
+
+@pytest.mark.parametrize("kind", [k for k in KINDS if (k, "points") in SHIPPED])
+def test_initial_guess_reproduces_the_benchmarks_world_clouds(kind):
+    """initial_guess (direction from normals, profile by the network) on the benchmark's world
+    clouds 0 and 1 (bench_shapes.py's definition: seed 10000 + i, 2,000 points, 0.5 % noise)
+    gives the axis error and input-to-surface mean the benchmark recorded (meta.fixed_batch)."""
+    from nurbskit.metrics import surface_distances
+    from nurbskit.shapes.synthetic import extrusion_cloud, vase_cloud
+
+    for want in _fixed_batch()["world"][kind]:
+        seed = 10_000 + want["cloud"]
+        c = (vase_cloud(2000, 0.005, seed) if kind == "revolution"
+             else extrusion_cloud(2000, 0.005, seed, "L" if seed % 2 else "smooth"))
+        guess = initial_guess(c.points, kind)
+        assert guess["direction_from"] == "normals"
+        cos = abs(float(guess["axis_direction"] @ c.axis_direction))
+        angle = math.degrees(math.acos(min(1.0, cos)))
+        mean = surface_distances(guess_surface(guess, kind), c.points)["to_surface_mean"]
+        assert abs(angle - want["axis_deg"]) < 1e-3
+        assert_close(torch.tensor(mean, dtype=F64), torch.tensor(want["to_surface_mean"], dtype=F64),
+                     atol=1e-4 * want["to_surface_mean"])
+        assert mean < 0.02  # the issue's goal: within 2 % of the diagonal
+
+
+def test_pointnet_matrix_products_are_the_convolutions():
+    """The encoder applies its 1x1 Conv1d weights as matrix products on channel-last points;
+    the Conv1d modules themselves (channel-first) are the oracle, in float64."""
+    model = build_model("revolution", "points").double().eval()
+    x = torch.randn(3, 57, 3, generator=_g(21), dtype=F64)
+    with torch.no_grad():
+        want = model.encoder.mlp(x.transpose(1, 2)).amax(-1)
+        assert_close(model.encoder(x), want, atol=1e-12)
 
 
 def test_search_score_is_the_training_chamfer():
@@ -233,27 +272,70 @@ def _tilted_vase():
 
 @pytest.mark.skipif(("revolution", "points") not in SHIPPED, reason="no shipped revolution model")
 def test_initial_guess_revolution_contract_and_axis():
-    """Bound: 5 degrees, above the benchmark's 95th percentile (4.4 degrees on 25 noisy world-pose
-    vases); measured 1.8 degrees on this cloud (seeds 0-7: 0.8 to 6.5 degrees)."""
+    """Bound: 2 degrees, above the benchmark's 95th percentile for the normals direction on
+    noisy world-pose vases; measured 0.8 degree on this clean cloud."""
     vase = _tilted_vase()
     guess = initial_guess(vase.points, "revolution")
     assert {"axis_point", "axis_direction", "profile"} <= set(guess)
+    assert guess["direction_from"] == "normals" and guess["chamfer"] is None
     d = guess["axis_direction"]
     assert d.shape == (3,) and d.dtype == F64
     assert_close(d.norm(), torch.tensor(1.0, dtype=F64), atol=1e-12)
     angle = math.degrees(math.acos(min(1.0, abs(float(d @ vase.axis_direction)))))
-    assert angle < 5.0
+    assert angle < 2.0
     # the axis point lies on the true axis (up to the guess's error)
     off = guess["axis_point"] - vase.axis_point
     assert float((off - (off @ vase.axis_direction) * vase.axis_direction).norm()) < 0.05
     prof = guess["profile"]
     assert prof.dim == 2 and prof.control_points.dtype == F64
     assert (prof.control_points[:, 0] >= 0).all()
-    # the guessed surface is near the cloud: within 5 % of the diagonal on average
+    # the guessed surface is near the cloud: within 2 % of the diagonal on average (the goal)
     surface = guess_surface(guess, "revolution")
     dense = surface.sample((64, 64)).reshape(-1, 3)
     diag = float((vase.points.amax(0) - vase.points.amin(0)).norm())
-    assert float(torch.cdist(vase.points, dense).amin(-1).mean()) < 0.05 * diag
+    assert float(torch.cdist(vase.points, dense).amin(-1).mean()) < 0.02 * diag
+
+
+@pytest.mark.skipif(("revolution", "points") not in SHIPPED, reason="no shipped revolution model")
+def test_normals_direction_is_the_shape_packages_estimate():
+    """direction="normals" is nurbskit.shapes.axis.revolution_axis on the normals of an even
+    subsample of AXIS_POINTS normalised points (the public functions, not a copy)."""
+    from nurbskit.shapes.axis import revolution_axis
+    from nurbskit.shapes.nets import guess as G
+    from nurbskit.shapes.normals import estimate_normals
+
+    vase = _tilted_vase()
+    rel = normalise(vase.points)[0]
+    sub = rel[torch.linspace(0, rel.shape[0] - 1, G.AXIS_POINTS, dtype=F64).round().long()]
+    want = revolution_axis(sub, estimate_normals(sub, G.AXIS_NEIGHBOURS["revolution"]),
+                           iterations=G.AXIS_ITERATIONS).direction
+    got = initial_guess(vase.points, "revolution")["axis_direction"]
+    assert_close(abs(got @ want), torch.tensor(1.0, dtype=F64), atol=1e-12)
+
+
+@pytest.mark.skipif(("revolution", "points") not in SHIPPED, reason="no shipped revolution model")
+def test_search_direction_recovers_the_axis():
+    """direction="search" (the network alone, 54 candidates by Chamfer). Bound: 5 degrees,
+    above the benchmark's 95th percentile of the search (about 4 degrees on noisy world-pose
+    vases); measured 1.8 degrees on this cloud. score=True adds the training Chamfer."""
+    vase = _tilted_vase()
+    guess = initial_guess(vase.points, "revolution", direction="search", score=True)
+    assert guess["direction_from"] == "search"
+    angle = math.degrees(math.acos(min(1.0, abs(float(guess["axis_direction"] @ vase.axis_direction)))))
+    assert angle < 5.0
+    assert 0 < guess["chamfer"] < 0.05  # squared distances in the unit ball; measured 0.015
+
+
+@pytest.mark.parametrize("kind", [k for k in KINDS if (k, "points") in SHIPPED])
+def test_ambiguous_normals_direction_falls_back_to_the_search(kind):
+    """A sphere: every line through its centre is an axis and its normals span all directions,
+    so the normals estimate is ambiguous (spread above SPREAD_LIMIT) and the network searches."""
+    from nurbskit.shapes.nets import guess as G
+
+    sphere = torch.nn.functional.normalize(torch.randn(800, 3, generator=_g(0), dtype=F64), dim=-1) * 3 + 1
+    _, spread = G._normals_direction(normalise(sphere)[0], kind)
+    assert spread > G.SPREAD_LIMIT
+    assert initial_guess(sphere, kind)["direction_from"] == "search"
 
 
 @pytest.mark.skipif(("extrusion", "points") not in SHIPPED, reason="no shipped extrusion model")
@@ -266,7 +348,7 @@ def test_initial_guess_extrusion_contract():
     t0, t1 = guess["extent"]
     assert t1 > t0
     angle = math.degrees(math.acos(min(1.0, abs(float(guess["axis_direction"] @ cloud.axis_direction)))))
-    assert angle < 6.5  # the benchmark's p95 on 25 noisy clouds: 6.1 degrees; this cloud: 0.9
+    assert angle < 2.5  # the normals direction; this clean cloud: 0.23 degree
     # the profile's (x, y) are in the contract's plane_basis frame about axis_point
     e1, e2 = plane_basis(guess["axis_direction"])
     assert_close(guess["frame"]["e1"], e1, atol=1e-12)
@@ -280,5 +362,7 @@ def test_initial_guess_refuses_bad_input():
         initial_guess(torch.zeros(5, 2, dtype=F64), "revolution")
     with pytest.raises(OptionError, match="kind"):
         initial_guess(torch.zeros(50, 3, dtype=F64), "cone")
+    with pytest.raises(OptionError, match="direction"):
+        initial_guess(torch.rand(50, 3, dtype=F64), "revolution", direction="pca")
     with pytest.raises(OptionError, match="nurbskit train revolve"):
         load_model("revolution", "points", "/nonexistent/weights.pt")

@@ -3,17 +3,28 @@
 Canonicalisation (how a world cloud is put in the frame the networks were trained in):
 
 1. centre on the centroid and divide by the largest distance from it (:func:`.data.normalise`);
-2. the direction (axis, or extrusion direction) by analysis by synthesis: for each
-   candidate direction ``d`` the cloud is turned so that ``d`` is z (frame rows ``(e1, e2,
-   d)``, ``e1`` by the contract's ``plane_basis`` rule), the network predicts a profile,
-   and the candidate whose generated surface is nearest the cloud (Chamfer) wins.
-   Principal directions alone do not do: a vase about as wide as it is tall has a nearly
-   isotropic covariance (eigenvalues within 5 %, measured), so PCA's eigenvectors point
-   anywhere. Candidates: the three principal directions and 30 directions over the
+2. the direction (axis, or extrusion direction), ``direction="normals"`` (the default):
+   the shape package's own estimators on an even subsample of :data:`AXIS_POINTS` points
+   (:func:`nurbskit.shapes.normals.estimate_normals`, then
+   :func:`nurbskit.shapes.axis.revolution_axis` (line geometry) or
+   :func:`~nurbskit.shapes.axis.extrusion_direction`, :data:`AXIS_ITERATIONS` robust
+   rounds): a few milliseconds of one CPU thread, a median error of 0.4-0.7 degree on
+   the benchmark's clouds. When that estimate is ambiguous (its ``spread`` above
+   :data:`SPREAD_LIMIT`: a sphere's axis, a plane's direction) the network's own search
+   below runs instead;
+3. ``direction="search"``: analysis by synthesis, the network alone: for each candidate
+   direction ``d`` the cloud is turned so that ``d`` is z (frame rows ``(e1, e2, d)``,
+   ``e1`` by the contract's ``plane_basis`` rule), the network predicts a profile, and
+   the candidate whose generated surface is nearest the cloud (Chamfer) wins. Principal
+   directions alone do not do: a vase about as wide as it is tall has a nearly isotropic
+   covariance (eigenvalues within 5 %, measured), so PCA's eigenvectors point anywhere
+   (measured on the benchmark's vases: the nearest eigenvector is 13 degrees off the axis
+   at the median). Candidates: the three principal directions and 30 directions over the
    hemisphere (about 25 degrees apart), then rings of 6 at 8, 3 and 1 degrees around the
-   best so far (54 network evaluations on a subsample, in batches);
-3. the final profile is predicted at the chosen direction from up to :data:`MAX_POINTS` points;
-4. the winner is mapped back: axis point = the centroid, lengths times the scale.
+   best so far (54 network evaluations on a subsample, in batches): about ten times the
+   time of step 2, for a 1-2 degree axis;
+4. the profile is predicted at the chosen direction from up to :data:`MAX_POINTS` points;
+5. the winner is mapped back: axis point = the centroid, lengths times the scale.
 
 Convention: the returned dict follows the network initialiser contract of
 ``docs/shapes.md`` (``fit_shape(init="network")``): ``axis_point (3,)``, ``axis_direction
@@ -21,7 +32,9 @@ Convention: the returned dict follows the network initialiser contract of
 the axis (revolution) or in ``(x, y)`` along ``plane_basis(axis_direction)`` from
 ``axis_point`` (extrusion), ``extent (t0, t1)`` for an extrusion, plus ``frame``
 (``origin``, ``e1``, ``e2``: the profile plane's 3-D unit vectors), ``chamfer`` (the
-winner's Chamfer distance in the normalised frame) and ``weights`` (the model's name).
+Chamfer distance of the generated surface in the normalised frame, with ``score=True``;
+None otherwise), ``weights`` (the model's name) and
+``direction_from`` (``"normals"`` or ``"search"``: which step found the direction).
 """
 
 from __future__ import annotations
@@ -35,14 +48,21 @@ from torch import Tensor
 from ...core.curve import NURBSCurve
 from ...errors import InputError, OptionError
 from ...core.neighbors import nearest_neighbors
+from ..axis import extrusion_direction, revolution_axis
+from ..normals import estimate_normals
 from .data import DEGREE, KINDS, N_CTRL, normalise, profile_knots
 from .models import build_model
 from .training import model_name
 
-__all__ = ["initial_guess", "guess_surface", "load_model", "plane_basis", "predict_canonical"]
+__all__ = ["DIRECTIONS", "initial_guess", "guess_surface", "load_model", "plane_basis", "predict_canonical"]
 
 MAX_POINTS = 1024  # points of the final prediction (an even stride through the cloud); the max pool is count-free
 SEARCH_POINTS = 160  # points per candidate direction in the search
+AXIS_POINTS = 400  # points of the normals-based direction (an even subsample)
+AXIS_NEIGHBOURS = {"revolution": 16, "extrusion": 24}  # k of the normals on that subsample
+AXIS_ITERATIONS = 3  # robust rounds of the line-geometry / direction fit
+SPREAD_LIMIT = 0.25  # a normals estimate with a larger spread is ambiguous: search instead
+DIRECTIONS = ("normals", "search")
 
 
 def plane_basis(direction: Tensor) -> tuple[Tensor, Tensor]:
@@ -93,11 +113,16 @@ def predict_canonical(model, clouds: Tensor) -> tuple[Tensor, Tensor]:
     with torch.no_grad():
         x = clouds.to(torch.float32)
         coords = model(x)
-        surf = model.surface_points(coords)
-        to_surface, _ = nearest_neighbors(x, surf, workers=1)
-        coverage, _ = nearest_neighbors(surf, x, workers=1)
-        chamfer = to_surface.mean(-1) + coverage.mean(-1)  # = chamfer_distance(x, surf), reduction "mean"
+        chamfer = _chamfer(x, model.surface_points(coords))
     return coords.to(torch.float64), chamfer.to(torch.float64)
+
+
+def _chamfer(x: Tensor, surf: Tensor) -> Tensor:
+    """``chamfer_distance(x, surf)`` (reduction "mean") per batch element, ``(B,)``, by the
+    core's neighbour search on one thread (see :func:`predict_canonical`)."""
+    to_surface, _ = nearest_neighbors(x, surf, workers=1)
+    coverage, _ = nearest_neighbors(surf, x, workers=1)
+    return to_surface.mean(-1) + coverage.mean(-1)
 
 
 def _check_points(points) -> Tensor:
@@ -146,25 +171,61 @@ def _score(model, cloud: Tensor, dirs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     return frames, coords, chamfer
 
 
-def initial_guess(points, kind: str, *, weights: str | None = None) -> dict:
+def _normals_direction(rel: Tensor, kind: str) -> tuple[Tensor, float]:
+    """Direction ``(3,)`` and spread of the normalised cloud ``rel (N, 3)`` from normals.
+
+    The public estimators of :mod:`nurbskit.shapes.axis` on an even subsample of at most
+    :data:`AXIS_POINTS` points (normals by :func:`~nurbskit.shapes.normals.estimate_normals`
+    with :data:`AXIS_NEIGHBOURS` neighbours): the subsample and the few robust rounds keep
+    it to a few milliseconds; the full geometric fit uses every point.
+    """
+    n = rel.shape[0]
+    sub = rel[torch.linspace(0, n - 1, min(n, AXIS_POINTS), dtype=torch.float64).round().long()]
+    normals = estimate_normals(sub, AXIS_NEIGHBOURS[kind])
+    if kind == "revolution":
+        axis = revolution_axis(sub, normals, iterations=AXIS_ITERATIONS)
+        return axis.direction, axis.spread
+    return extrusion_direction(normals, iterations=AXIS_ITERATIONS)
+
+
+def _search_direction(model, rel: Tensor) -> Tensor:
+    """The network's direction for the normalised cloud ``rel (N, 3)`` (module docstring, step 3)."""
+    _, evecs = torch.linalg.eigh(rel.T @ rel / rel.shape[0])
+    search = rel[:: max(1, -(-rel.shape[0] // SEARCH_POINTS))]
+    dirs = torch.cat([evecs.T, _hemisphere(30)])
+    _, _, chamfer = _score(model, search, dirs)
+    d = dirs[int(torch.argmin(chamfer))]
+    for degrees in (8.0, 3.0, 1.0):
+        dirs = _ring(d, degrees, 6)
+        _, _, chamfer = _score(model, search, dirs)
+        d = dirs[int(torch.argmin(chamfer))]
+    return d
+
+
+def initial_guess(points, kind: str, *, weights: str | None = None, direction: str = "normals",
+                  score: bool = False) -> dict:
     """The trained network's surface of ``kind`` for a world cloud ``points (N, 3)``.
 
-    The direction (axis or extrusion direction) is searched by analysis by synthesis: the
-    network predicts a profile for the cloud turned to each candidate direction and the
-    direction whose generated surface is nearest the cloud (Chamfer) wins. Candidates:
-    the three principal directions and 30 directions over the hemisphere (about 25
-    degrees apart), then rings of 6 at 8, 3 and 1 degrees around the best so far; the
-    search uses at most :data:`SEARCH_POINTS` points, the final prediction
-    :data:`MAX_POINTS`. The axis passes through the centroid.
+    The direction (axis or extrusion direction) comes from normals
+    (``direction="normals"``: the public estimators of :mod:`nurbskit.shapes.axis` on
+    :data:`AXIS_POINTS` points; the search below when that is ambiguous) or from the
+    network alone (``direction="search"``: analysis by synthesis, the direction whose
+    generated surface is nearest the cloud by Chamfer among 54 candidates; see the module
+    docstring). The network then predicts the profile from up to :data:`MAX_POINTS`
+    points turned to that direction. The axis passes through the centroid.
 
     Args:
         points: ``(N, 3)`` float64, any pose and size (not centred or scaled).
         kind: 'revolution' or 'extrusion'.
         weights: a weights file instead of the shipped ``shapes_<kind>_points``.
+        direction: 'normals' (default) or 'search'.
+        score: also compute ``chamfer`` (the training loss between :data:`SEARCH_POINTS` of
+            the points and the generated surface, in the normalised frame; about 1 ms, so
+            off by default: ``chamfer`` is then None).
 
     Returns:
         the contract's dict (module docstring). Raises InputError for bad points,
-        OptionError when the weights are missing.
+        OptionError when the weights are missing or an option is unknown.
 
     Example:
         >>> from nurbskit.shapes.synthetic import vase_cloud
@@ -174,23 +235,30 @@ def initial_guess(points, kind: str, *, weights: str | None = None) -> dict:
     """
     if kind not in KINDS:
         raise OptionError(f"initial_guess: kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    if direction not in DIRECTIONS:
+        raise OptionError(f"initial_guess: direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
     p = _check_points(points)
     model = load_model(kind, "points", weights)
     rel, centre, scale = normalise(p)
-    _, evecs = torch.linalg.eigh(rel.T @ rel / rel.shape[0])
-    search = rel[:: max(1, -(-rel.shape[0] // SEARCH_POINTS))]
-    dirs = torch.cat([evecs.T, _hemisphere(30)])
-    frames, _, chamfer = _score(model, search, dirs)
-    d = dirs[int(torch.argmin(chamfer))]
-    for degrees in (8.0, 3.0, 1.0):
-        dirs = _ring(d, degrees, 6)
-        frames, _, chamfer = _score(model, search, dirs)
-        d = dirs[int(torch.argmin(chamfer))]
-    frames, coords, chamfer = _score(model, rel[:: max(1, -(-rel.shape[0] // MAX_POINTS))], d[None])
-    frame, c = frames[0], coords[0]
+    found = "search"
+    if direction == "normals":
+        d, spread = _normals_direction(rel, kind)
+        if spread <= SPREAD_LIMIT:
+            found = "normals"
+    if found == "search":
+        d = _search_direction(model, rel)
+    frame = _frames(d[None])[0]
+    with torch.no_grad():
+        x = (rel[:: max(1, -(-rel.shape[0] // MAX_POINTS))] @ frame.T).to(torch.float32)
+        coords = model(x[None])
+        chamfer = None
+        if score:  # on SEARCH_POINTS of them: the neighbour search costs more than the network
+            check = (rel[:: max(1, -(-rel.shape[0] // SEARCH_POINTS))] @ frame.T).to(torch.float32)
+            chamfer = float(_chamfer(check[None], model.surface_points(coords))[0])
+    c = coords[0].to(torch.float64)
     prof = c[: 2 * N_CTRL].reshape(N_CTRL, 2) * scale
-    out = {"axis_point": centre.clone(), "axis_direction": d.clone(), "chamfer": float(chamfer[0]),
-           "weights": model_name(kind, "points")}
+    out = {"axis_point": centre.clone(), "axis_direction": frame[2].clone(), "chamfer": chamfer,
+           "weights": model_name(kind, "points"), "direction_from": found}
     # the frame's e1 is the contract's plane_basis(d) rule (see _frames), so the profile needs no turn;
     # a revolution's profile is (r, z) whatever e1 is: the network knows full turns only, the fitter
     # finds a partial angle from the points

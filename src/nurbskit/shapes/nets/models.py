@@ -40,7 +40,14 @@ class PointNetEncoder(nn.Module):
         self.features = c
 
     def forward(self, points: Tensor) -> Tensor:
-        return self.mlp(points.transpose(1, 2)).amax(-1)
+        # the 1x1 convolutions applied as matrix products on the channel-last points: the same
+        # weights and numbers (to float rounding), about 3x faster for a batch of small clouds
+        # on one CPU thread (measured: 33 clouds of 167 points, 20 -> 6.5 ms), which the
+        # direction search of :func:`~.guess.initial_guess` runs
+        h = points
+        for layer in self.mlp:
+            h = nn.functional.linear(h, layer.weight[..., 0], layer.bias) if isinstance(layer, nn.Conv1d) else layer(h)
+        return h.amax(-2)
 
 
 class SilhouetteCNN(nn.Module):
