@@ -48,7 +48,12 @@ NODE_FRACTION = 0.5
 sparse data (a mesh's rings: many points, few positions) cannot pin more, the curve would
 swing between them."""
 PATIENCE = 2
+"""The ladder stops after this many rungs without a new minimum of the criterion."""
+CHECK_EVERY = 2
+"""The curve projections check convergence every this many Newton iterations (warm starts
+converge in two or three)."""
 FAST_CORRECTIONS = True
+"""Only the first parameter correction restarts from the grid."""
 """A rung is refused when its knot spans are shorter than this many times the RMS residual."""
 
 
@@ -254,9 +259,10 @@ def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2, closed
         for c in range(corrections):
             # the first correction also restarts from the grid (the chord-length start can
             # sit in the wrong basin); later ones move little, warm starts suffice
-            u = project_points_curve(curve, x, params=u, restart=c == 0 or not FAST_CORRECTIONS).params
+            u = project_points_curve(curve, x, params=u, restart=c == 0 or not FAST_CORRECTIONS,
+                                     check_every=CHECK_EVERY).params
             curve = fit_curve_lsq(x, u, n, degree, knots=curve.knot_vector, closed=closed)
-        dist = project_points_curve(curve, x, params=u).distance
+        dist = project_points_curve(curve, x, params=u, check_every=CHECK_EVERY).distance
         msq = float((dist ** 2).mean())
         # knot spans shorter than a few times the noise band's width let the curve zig-zag
         # through the noise (its residual then falls below the noise): stop the ladder there
