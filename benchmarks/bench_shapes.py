@@ -155,6 +155,9 @@ def real_clouds(data: Path, n: int = 2000) -> dict:
     """The real-data cases (``--real``): name -> (points (n, 3), what it is).
 
     * ``cylinder``: ``classic_meshes/cylinder.obj`` (a capped cylinder), ``n`` area-uniform samples;
+    * ``cylinder_vertices``: the same mesh's raw vertices (11 rings of 20 points, no cap
+      vertices): sparse, evenly spaced; run with ``--kind extrusion`` too (``--real-kinds``)
+      so that the closed circle shows;
     * ``kinect31_obj20/30/40``: the three objects of ``kinect_scans/test31.pcd`` (the
       "cylindric objects" test scene), each cropped by its segmentation label (seen from one
       side: partial revolutions), ``n`` of its points (fixed seed);
@@ -170,6 +173,9 @@ def real_clouds(data: Path, n: int = 2000) -> dict:
     mesh = read_mesh(data / "classic_meshes" / "cylinder.obj")
     out["cylinder"] = (np.asarray(sample_mesh(mesh.vertices, mesh.faces, n, "uniform", seed=0)),
                        "classic_meshes/cylinder.obj, capped, 2,000 samples")
+    out["cylinder_vertices"] = (np.asarray(mesh.vertices, dtype=np.float64),
+                                f"classic_meshes/cylinder.obj, its {len(mesh.vertices)} raw vertices "
+                                "(rings of 20: sparse, evenly spaced)")
     scan = read_points(data / "kinect_scans" / "test31.pcd")
     for label in (20, 30, 40):
         pts = np.asarray(scan.points)[np.asarray(scan.labels) == label]
@@ -196,34 +202,39 @@ def real(args) -> None:
     figs = Path(__file__).resolve().parent / "results" / "shapes_figures"
     figs.mkdir(parents=True, exist_ok=True)
     rows = []
-    for name, (pts, what) in real_clouds(data, args.points).items():
+    cases = [(name, pts, what, args.kind) for name, (pts, what) in real_clouds(data, args.points).items()]
+    # the raw vertices as an extrusion too: the sparse rings' circle must close
+    cases += [(name + "_extrusion", pts, what, "extrusion") for name, pts, what, _ in cases
+              if name == "cylinder_vertices"]
+    for name, pts, what, kind in cases:
         with tempfile.TemporaryDirectory() as tmp:
             src = Path(tmp) / f"{name}.npy"
             np.save(src, pts)
             out = figs / name
-            t = time.perf_counter()
-            rc = cli(["shape", str(src), "--kind", args.kind, "--out", str(out), "--overwrite"])
-            seconds = time.perf_counter() - t
+            t, cpu = time.perf_counter(), time.process_time()
+            rc = cli(["shape", str(src), "--kind", kind, "--out", str(out), "--overwrite"])
+            seconds, cpu = time.perf_counter() - t, time.process_time() - cpu
         rep = json.loads((out / "report.json").read_text())
         (out / "surface.json").unlink(missing_ok=True)  # figures and report only: keep the repository small
         shutil.rmtree(out / "__pycache__", ignore_errors=True)
         m = rep["metrics"]
-        rows.append({"case": name, "what": what, "rc": rc, "kind": rep["kind"],
+        rows.append({"case": name, "what": what, "rc": rc, "asked": kind, "kind": rep["kind"],
                      "candidates": ", ".join(f"{k} {v:.2e}" for k, v in rep["candidates"].items()),
                      "axis_direction": [round(x, 4) for x in rep["axis"]["direction"]] if rep["axis"] else None,
                      "angle_deg": round(math.degrees(rep["angle"]), 1) if "angle" in rep else None,
                      "closed": rep["profile"]["closed"] if rep["profile"] else None,
-                     "mean": m["to_surface_mean"], "p95": m["to_surface_p95"], "seconds": seconds,
+                     "mean": m["to_surface_mean"], "p95": m["to_surface_p95"], "seconds": seconds, "cpu_seconds": cpu,
                      "poor_fit": rep["poor_fit"]})
         print(rows[-1], flush=True)
-    cols = [("case", "case"), ("what", "input"), ("kind", "kind chosen"), ("candidates", "auto: mean / diag per kind"),
+    cols = [("case", "case"), ("what", "input"), ("asked", "--kind"), ("kind", "kind found"), ("candidates", "auto: mean / diag per kind"),
             ("axis_direction", "axis / direction"), ("angle_deg", "angle (deg)"), ("closed", "closed profile"),
             ("mean", "in-to-surface mean / diag"), ("p95", "p95 / diag"), ("poor_fit", "poor fit warned"),
-            ("seconds", "s")]
+            ("cpu_seconds", "CPU s"), ("seconds", "wall s")]
     write_results("shapes_real", rows, cols, meta={"points": args.points, "kind": args.kind},
-                  title="Shapes on real data: nurbskit shape --kind auto",
+                  title="Shapes on real data: nurbskit shape",
                   notes="Figures (cloud.png, profile.png, error_map.png, report.json) under "
-                        "benchmarks/results/shapes_figures/<case>/. Seconds on a shared, contended machine.")
+                        "benchmarks/results/shapes_figures/<case>/. CPU seconds (the whole command: fits, "
+                        "report, figures) in the process; wall seconds on a shared, contended machine.")
 
 
 def main(argv=None) -> None:
