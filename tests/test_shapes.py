@@ -215,3 +215,93 @@ def test_open_profiles_are_not_closed():
     t = torch.linspace(0, 2 * math.pi, 400, dtype=F64)[:-1]
     xy = torch.stack([t.cos(), 0.5 * t.sin()], -1).numpy()
     assert is_closed(xy, order_points(xy))
+
+
+def _rounded_rectangle(count: int, width: float = 2.0, height: float = 1.0, radius: float = 0.3,
+                       offset: float = 0.0):
+    """``count`` points ``(count, 2)`` evenly spaced by arc length on a rounded rectangle
+    centred at the origin (straight sides and quarter circles), starting ``offset`` of a
+    spacing along."""
+    a, b = width / 2 - radius, height / 2 - radius
+    pieces = [("line", (a, -b - radius), (-1, 0), 2 * a), ("arc", (-a, -b), -math.pi / 2, -1),
+              ("line", (-a - radius, -b), (0, 1), 2 * b), ("arc", (-a, b), math.pi, -1),
+              ("line", (-a, b + radius), (1, 0), 2 * a), ("arc", (a, b), math.pi / 2, -1),
+              ("line", (a + radius, b), (0, -1), 2 * b), ("arc", (a, -b), 0.0, -1)]
+    lengths = [p[3] if p[0] == "line" else math.pi / 2 * radius for p in pieces]
+    total = sum(lengths)
+    out = []
+    for i in range(count):
+        s = (i + offset) * total / count
+        for piece, length in zip(pieces, lengths):
+            if s <= length:
+                break
+            s -= length
+        if piece[0] == "line":
+            (x, y), (dx, dy) = piece[1], piece[2]
+            out.append((x + s * dx, y + s * dy))
+        else:
+            (cx, cy), start = piece[1], piece[2]
+            t = start - s / radius  # clockwise, as the lines run
+            out.append((cx + radius * math.cos(t), cy + radius * math.sin(t)))
+    return torch.tensor(out, dtype=F64)
+
+
+def _extrude_rings(ring, heights):
+    """Rings ``(K, 2)`` stacked at ``heights``, in the plane orthogonal to z: ``(len(heights) K, 3)``."""
+    return torch.cat([torch.cat([ring, torch.full((ring.shape[0], 1), float(h), dtype=F64)], 1) for h in heights])
+
+
+def test_sparse_evenly_spaced_rings_close():
+    """The closing test follows the sampling: a ring of a few evenly spaced points (gap
+    between the ordering's ends = one spacing) closes; the same points on an arc do not."""
+    from nurbskit.shapes.profile import is_closed
+
+    for count in (8, 12, 24):
+        t = torch.arange(count, dtype=F64) * 2 * math.pi / count
+        assert is_closed(torch.stack([t.cos(), t.sin()], -1).numpy())
+        assert is_closed(_rounded_rectangle(count).numpy())
+        arc = torch.linspace(0, math.pi, count, dtype=F64)  # a half circle: its ends a diameter apart
+        assert not is_closed(torch.stack([arc.cos(), arc.sin()], -1).numpy())
+
+
+@pytest.mark.parametrize("section", ["circle", "rounded_rectangle"])
+def test_sparse_closed_extrusion_round_trip(section):
+    """An extruded circle (12 points per ring) and rounded rectangle (20 per ring), 6 rings
+    (the gap between the ordering's ends is one spacing, 0.52 and 0.27 of the extent):
+    the profile closes (last control point = first) and the surface follows the true
+    section between the samples (dense points of the truth to the fit)."""
+    heights = torch.linspace(0, 1.5, 6, dtype=F64)
+    if section == "circle":
+        t = torch.arange(12, dtype=F64) * 2 * math.pi / 12
+        ring = torch.stack([t.cos(), t.sin()], -1)
+        s = torch.linspace(0, 2 * math.pi, 400, dtype=F64)
+        dense = torch.stack([s.cos(), s.sin()], -1)
+    else:
+        ring, dense = _rounded_rectangle(20), _rounded_rectangle(400, offset=0.5)
+    fit = fit_shape(_extrude_rings(ring, heights), "extrusion", iterations=10)
+    assert fit.closed, "the profile was left open"
+    P = fit.profile.control_points
+    assert torch.equal(P[0], P[-1])
+    assert axis_angle_degrees(fit.axis["direction"], [0.0, 0.0, 1.0]) < 0.2
+    # few points per ring: the (clamped, C0-at-the-seam) cubic has at most half as many
+    # control points as the ring has points, and is an approximation between them
+    assert fit.distance_mean < 5e-3
+    truth = _extrude_rings(dense, [0.3, 1.1])
+    d = surface_distances(fit.surface, truth)
+    assert d["to_surface_mean"] < 5e-3 and d["to_surface_max"] < 2e-2, d
+
+
+def test_real_cylinder_vertices_close(shared_data):
+    """cylinder.obj's raw vertices (11 rings of 20, radius 1 along y): as an extrusion the
+    circle closes; auto calls the near-exact tie a revolution."""
+    from nurbskit.io import read_mesh
+
+    v = torch.as_tensor(read_mesh(shared_data / "classic_meshes" / "cylinder.obj").vertices, dtype=F64)
+    fit = fit_shape(v, "extrusion", iterations=10)
+    assert fit.closed, "the circle was left open"
+    assert axis_angle_degrees(fit.axis["direction"], [0.0, 1.0, 0.0]) < 0.2
+    s = torch.linspace(0, 2 * math.pi, 300, dtype=F64)
+    truth = torch.stack([s.cos(), torch.zeros_like(s), s.sin()], -1)
+    assert surface_distances(fit.surface, truth)["to_surface_max"] < 5e-3
+    auto = fit_shape(v, "auto", iterations=5, freeform=False)
+    assert auto.kind == "revolution", auto.reason
