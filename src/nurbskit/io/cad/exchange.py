@@ -2,7 +2,8 @@
 
 Writing (:func:`write_cad`): nurbskit objects become an OCC shape
 (:func:`~nurbskit.io.cad.shapes.to_shape`), OCC's own translator writes the file, and the
-file is then read back with OCC and checked with ``BRepCheck_Analyzer`` (and its face
+file is then read back with OCC, without its shape healing (:data:`CHECK_READ_FIXES`: the
+check is of the file as written), and checked with ``BRepCheck_Analyzer`` (and its face
 count compared): a failing check is a :class:`~nurbskit.errors.NurbskitError` and the
 file is not left behind (writes are atomic).
 
