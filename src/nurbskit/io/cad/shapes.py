@@ -223,15 +223,17 @@ def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
 
 
 #: (u, v) segments per edge of a trimming loop; 0: one closed edge per loop. Why not one
-#: edge per loop: OCC intersects pcurves (BRepCheck_Face::IntersectWires on writing's
-#: check, ShapeFix's self-intersection tests on reading) interval by interval, and a
-#: degree-1 pcurve has one C0 interval per segment, so a 64-segment loop against a
-#: 32-segment hole is 2048 interval pairs; short edges are first sorted out by their 2-D
-#: boxes. Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
-#: seconds, STEP written = shape + write + read back + BRepCheck): 0 -> 4.1 s, 4 -> 3.6 s
-#: (the analyzer alone 0.9 -> 0.4 s; the file 16 % larger), 1 (an edge per segment) ->
-#: 6.1 s (the file's per-edge entities dominate); results/cad.md has the ablation.
-EDGE_SEGMENTS = 4
+#: edge per loop: OCC intersects pcurves (BRepCheck_Face::IntersectWires in the check,
+#: ShapeFix's self-intersection tests when a file is read with healing) interval by
+#: interval, and a degree-1 pcurve has one C0 interval per segment, so a 64-segment loop
+#: against a 32-segment hole is 2048 interval pairs; short edges are first sorted out by
+#: their 2-D boxes. Why not one edge per segment: the file's per-edge entities dominate.
+#: Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
+#: seconds, STEP written = shape + write + read back + BRepCheck, the check without
+#: healing; one run under load): 0 -> 4.4 s, 4 -> 4.5 s, 8 -> 4.0 s (the check 2.5, 2.1,
+#: 1.7 s; 14.6, 17.0, 15.7 MB); with healing on reading, earlier: 0 -> 4.1, 1 -> 6.1,
+#: 4 -> 3.6 s. results/cad.md has the ablation.
+EDGE_SEGMENTS = 8
 
 
 def _bspline_curve_3d(poles, weights, flat, degree):
