@@ -230,9 +230,10 @@ def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
 #: their 2-D boxes. Why not one edge per segment: the file's per-edge entities dominate.
 #: Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
 #: seconds, STEP written = shape + write + read back + BRepCheck, the check without
-#: healing; one run under load): 0 -> 4.4 s, 4 -> 4.5 s, 8 -> 4.0 s (the check 2.5, 2.1,
-#: 1.7 s; 14.6, 17.0, 15.7 MB); with healing on reading, earlier: 0 -> 4.1, 1 -> 6.1,
-#: 4 -> 3.6 s. results/cad.md has the ablation.
+#: healing; two runs under load 6 to 11): 0 -> 4.4 / 3.9 s, 4 -> 4.5 / 4.3 s, 8 -> 4.0 /
+#: 4.3 s (14.6, 17.0, 15.7 MB): within the noise of each other; 8 for half the edges of 4
+#: and a smaller file. With healing on reading, earlier: 0 -> 4.1, 1 -> 6.1, 4 -> 3.6 s.
+#: results/cad.md has the latest ablation.
 EDGE_SEGMENTS = 8
 
 
