@@ -10,7 +10,8 @@ stage once to warm up, then the median of ``--repeats`` runs:
 
 - ``shape``: nurbskit objects to one OCC compound (faces with exact trimming curves);
 - ``write``: OCC's translator and the 17-digit text writer (BREP: ``BRepTools::Write``);
-- ``check``: the built-in check (file read back with OCC, ``BRepCheck_Analyzer``);
+- ``check``: the built-in check (file read back with OCC without its shape healing, as
+  ``write_shape`` does, then ``BRepCheck_Analyzer`` in its parallel mode);
 - ``written``: shape + write + check, what ``write_cad`` costs;
 - ``read``: ``read_cad``, the file to 100 TrimmedSurface objects.
 
@@ -56,6 +57,10 @@ from _harness import write_results  # noqa: E402
 
 import nurbskit  # noqa: E402
 from nurbskit.core.trim import TrimLoop, TrimmedSurface  # noqa: E402
+
+
+#: written CPU seconds before the check lost OCC's healing (results/cad.md of the previous run)
+BEFORE = "STEP 3.31 s (shape 0.87, write 0.76, check 1.68), IGES 4.73 s (check 3.24), BREP 1.61 s"
 
 
 def make_patches(count: int, size: int = 12, seed: int = 0) -> list[TrimmedSurface]:
@@ -183,7 +188,7 @@ def ablation(patches, tmp: Path, segments: list[int]) -> list[dict]:
             path = tmp / f"ablation-{k}.step"
             ts, cs, shape = median_time(lambda: shapes.to_shape(patches, sew_tolerance=None), 1)
             tw, cw, _ = median_time(lambda: write_shape(shape, path, check=False), 1)
-            tc, cc, report = median_time(lambda: shapes.check_shape(read_shape(path)), 1)
+            tc, cc, report = median_time(lambda: shapes.check_shape(read_shape(path, heal=False)), 1)
             rows.append({"edge_segments": k, "written_cpu_s": cs + cw + cc, "shape_cpu_s": cs, "write_cpu_s": cw,
                          "check_cpu_s": cc, "written_s": ts + tw + tc, "edges": report["edges"],
                          "valid": report["valid"], "file_mb": path.stat().st_size / 1e6})
@@ -215,9 +220,13 @@ def main(argv=None) -> int:
             path = Path(tmp) / f"patches.{fmt}"
             t_write, c_write, _ = median_time(lambda: write_shape(shape, path, check=False), args.repeats)
             # the check = reading the file back + OCC's checker on what was read: timed apart
-            t_back, c_back, back = median_time(lambda: read_shape(path), args.repeats)
+            t_back, c_back, back = median_time(lambda: read_shape(path, heal=False), args.repeats)
             t_analyze, c_analyze, report = median_time(lambda: check_shape(back), args.repeats)
             t_check, c_check = t_back + t_analyze, c_back + c_analyze
+            # the previous check in the same run (the same load): OCC's default reading with
+            # its shape healing, and the analyzer on one thread
+            t_old_back, c_old_back, old_back = median_time(lambda: read_shape(path), args.repeats)
+            t_old_an, c_old_an, _ = median_time(lambda: check_shape(old_back, parallel=False), args.repeats)
             t_read, c_read, model = median_time(lambda: read_cad(path), args.repeats)
             peer = Path(tmp) / f"peer.{fmt}"
             t_peer, _, _ = median_time(lambda: occ_default_write(shape, peer, fmt), args.repeats)
@@ -227,6 +236,11 @@ def main(argv=None) -> int:
                 "written_s": t_shape + t_write + t_check, "read_s": t_read,
                 "shape_cpu_s": c_shape, "write_cpu_s": c_write, "check_cpu_s": c_check, "written_cpu_s": c_written,
                 "read_cpu_s": c_read, "check_read_back_cpu_s": c_back, "check_analyzer_cpu_s": c_analyze,
+                "check_read_back_s": t_back,
+                "healed_check_cpu_s": c_old_back + c_old_an, "healed_check_s": t_old_back + t_old_an,
+                "healed_read_back_cpu_s": c_old_back, "serial_analyzer_cpu_s": c_old_an,
+                "written_cpu_s_with_healed_check": c_shape + c_write + c_old_back + c_old_an,
+                "check_vs_healed_check_cpu": c_check / (c_old_back + c_old_an),
                 "shape_fraction": c_shape / c_written, "write_fraction": c_write / c_written,
                 "check_fraction": c_check / c_written,
                 "occ_default_write_s": t_peer, "write_vs_occ_default": t_write / t_peer,
@@ -238,7 +252,7 @@ def main(argv=None) -> int:
             print(f"{fmt}: written {rows[-1]['written_s']:.2f} s wall, {c_written:.2f} s CPU (shape {c_shape:.2f}, "
                   f"write {c_write:.2f}, check {c_check:.2f}), read {c_read:.2f} s CPU, valid {report['valid']}",
                   file=sys.stderr)
-        ablation_rows = ablation(patches, Path(tmp), [0, 1, shapes.EDGE_SEGMENTS])
+        ablation_rows = ablation(patches, Path(tmp), sorted({0, 4, 8, shapes.EDGE_SEGMENTS}))
     meta = {
         "patches": len(patches), "control_points": "12 x 12, bicubic, rational", "loop_points": [64, 32],
         "edge_segments": shapes.EDGE_SEGMENTS,
@@ -257,7 +271,11 @@ def main(argv=None) -> int:
              "Seconds: wall (median); `CPU` columns: CPU seconds of the process (one thread), what a stage costs on "
              f"an idle core. STEP's CPU split: shape {step['shape_fraction']:.0%}, write {step['write_fraction']:.0%}, "
              f"check {step['check_fraction']:.0%} (reading the file back {step['check_read_back_cpu_s']:.2f} s, "
-             f"BRepCheck_Analyzer {step['check_analyzer_cpu_s']:.2f} s). "
+             f"BRepCheck_Analyzer {step['check_analyzer_cpu_s']:.2f} s CPU, "
+             f"{step['check_s'] - step['check_read_back_s']:.2f} s wall on its threads). "
+             "The check reads the file back without OCC's shape healing (exchange.CHECK_READ_FIXES); "
+             "`previous check`: OCC's default reading (healing) and a serial analyzer, timed in the same run. "
+             f"Before this (the same benchmark, healing on, serial analyzer): written CPU {BEFORE}. "
              f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
              f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop (over its edges); "
              f"OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
@@ -269,6 +287,8 @@ def main(argv=None) -> int:
              "that contention; CPU seconds and ratios within the run are fairer.")
     columns = [("format", "format"), ("written_s", "written (s)"), ("written_cpu_s", "written CPU (s)"),
                ("shape_cpu_s", "shape CPU"), ("write_cpu_s", "write CPU"), ("check_cpu_s", "check CPU"),
+               ("healed_check_cpu_s", "previous check CPU (healing, serial)"),
+               ("written_cpu_s_with_healed_check", "written CPU with previous check"),
                ("read_s", "read (s)"), ("read_cpu_s", "read CPU"), ("write_s", "write (s)"),
                ("occ_default_write_s", "OCC default write (s)"), ("write_vs_occ_default", "write / OCC default"),
                ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("edges", "edges"),

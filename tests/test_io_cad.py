@@ -380,3 +380,36 @@ def test_abc_step_faces_lie_on_the_abc_stl(shared_data, tmp_path):
         BRepGProp.SurfaceProperties_s(shape, props, 1e-4)  # adaptive (the fixed rule misses rational patches by 0.1 %)
         areas.append(props.Mass())
     assert abs(areas[1] - areas[0]) <= 1e-3 * areas[0]  # measured 1.4e-4: circular holes as polylines
+
+
+def _face_with_crossing_hole():
+    """A face whose hole crosses its outer loop: invalid (BRepCheck_IntersectingWires)."""
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    g = np.linspace(0.0, 10.0, 4)
+    cp = np.stack([*np.meshgrid(g, g, indexing="ij"), np.zeros((4, 4))], -1)
+    surface = nurbskit.NURBSSurface(torch.tensor(cp), (3, 3))
+    th = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    outer = TrimLoop.from_uv(np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]]))
+    hole = TrimLoop(np.stack([0.8 + 0.15 * np.cos(th), 0.5 + 0.15 * np.sin(th)], 1)[::-1], "hole")
+    face = shapes.face_of(TrimmedSurface(surface, [outer, hole]))
+    assert not BRepCheck_Analyzer(face).IsValid()
+    return face
+
+
+@pytest.mark.parametrize("fmt", ["step", "iges", "brep"])
+def test_an_invalid_shape_is_caught_by_the_check_without_healing(tmp_path, fmt):
+    from nurbskit.io.cad.exchange import read_shape, write_shape
+
+    face = _face_with_crossing_hole()
+    with pytest.raises(NurbskitError, match="fails OpenCASCADE's check"):
+        write_shape(face, tmp_path / f"bad.{fmt}")
+    assert list(tmp_path.iterdir()) == []
+    # the check reads the file as written: OCC's healing (read_shape's default) would have
+    # cut the face into two valid ones, and a check of that would have passed
+    write_shape(face, tmp_path / f"bad.{fmt}", check=False)
+    unhealed = shapes.check_shape(read_shape(tmp_path / f"bad.{fmt}", heal=False))
+    assert not unhealed["valid"] and unhealed["faces"] == 1
+    if fmt != "brep":  # BREP has no healing on reading
+        healed = shapes.check_shape(read_shape(tmp_path / f"bad.{fmt}"))
+        assert healed["valid"] and healed["faces"] == 2

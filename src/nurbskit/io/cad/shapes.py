@@ -95,18 +95,40 @@ def _bernstein_inverse(degree: int) -> tuple[np.ndarray, np.ndarray]:
     return tau, np.linalg.inv(basis)
 
 
-def _homogeneous(surface):
-    """The surface's homogeneous form ``(x w, y w, z w, w)`` as a non-rational 4-D surface."""
-    from ...core.surface import NURBSSurface
-
-    cp = surface.control_points.detach().cpu().double()
-    w = surface.weights.detach().cpu().double()
-    cp = torch.cat([_pad3(cp) * w[..., None], w[..., None]], dim=-1)
-    return NURBSSurface(cp, surface.degrees, [k.detach().cpu().double() for k in surface.knot_vectors])
+def _homogeneous_net(surface) -> np.ndarray:
+    """The surface's control net in homogeneous form ``(x w, y w, z w, w)``: ``(n, m, 4)``."""
+    cp = _pad3(surface.control_points.detach().cpu().double()).numpy()
+    w = surface.weights.detach().cpu().double().numpy()
+    return np.concatenate([cp * w[..., None], w[..., None]], axis=-1)
 
 
 def _pad3(cp):
     return cp if cp.shape[-1] == 3 else torch.cat([cp, torch.zeros(cp.shape[:-1] + (1,), dtype=cp.dtype)], dim=-1)
+
+
+def _homogeneous_points(surface, net: np.ndarray, uv: np.ndarray, span_uv: np.ndarray) -> np.ndarray:
+    """``S_h(u, v)`` ``(M, 4)`` of the homogeneous surface at ``uv (M, 2)``, each point on the
+    knot span of ``span_uv (M, 2)`` (a point of the span it belongs to: a piece's ends on
+    a knot line are then evaluated on the piece's own span).
+
+    The tensor-product sum over the ``(p + 1) x (q + 1)`` non-zero basis functions (The
+    NURBS Book A3.5), with nurbskit's basis (:func:`nurbskit.core.basis.basis_functions`)
+    and the contraction in NumPy: a few dozen array operations per surface, where a
+    4-D NURBSSurface's ``evaluate`` spent most of its time setting itself up.
+    """
+    from ...core.basis import basis_functions
+    from ...core.knots import find_spans
+
+    values, index = [], []
+    for axis, degree in enumerate(surface.degrees):
+        knots = surface.knot_vectors[axis].detach().cpu().double()
+        spans = find_spans(knots, degree, net.shape[axis], torch.from_numpy(np.ascontiguousarray(span_uv[:, axis])))
+        basis = basis_functions(knots, degree, spans, torch.from_numpy(np.ascontiguousarray(uv[:, axis])))
+        values.append(basis.numpy())
+        index.append(spans.numpy()[:, None] - degree + np.arange(degree + 1))
+    block = net[index[0][:, :, None], index[1][:, None, :]]  # (M, p + 1, q + 1, 4)
+    weights = values[0][:, :, None, None] * values[1][:, None, :, None]  # (M, p + 1, q + 1, 1)
+    return (weights * block).sum(axis=(1, 2))
 
 
 def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
@@ -141,14 +163,15 @@ def loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[
         k = np.unique(kv.detach().cpu().double().numpy())
         inner.append(k[(k > lo) & (k < hi)])
     tau, inverse = _bernstein_inverse(d)
-    pieces, all_nodes = [], []
+    pieces, all_nodes, all_mids = [], [], []
     for uv, params in loops:
         starts, ends, s_start, s_end = _loop_pieces(uv, params, inner)
         nodes = starts[:, None, :] + tau[None, :, None] * (ends - starts)[:, None, :]  # (P, d + 1, 2)
         nodes[:, 0], nodes[:, -1] = starts, ends
         pieces.append((s_start, s_end))
         all_nodes.append(nodes.reshape(-1, 2))
-    h_all = _homogeneous(surface).evaluate(torch.from_numpy(np.vstack(all_nodes))).numpy()
+        all_mids.append(np.repeat(0.5 * (starts + ends), d + 1, axis=0))  # the piece's knot span
+    h_all = _homogeneous_points(surface, _homogeneous_net(surface), np.vstack(all_nodes), np.vstack(all_mids))
     out, offset = [], 0
     rational = bool(surface.is_rational)
     for (s_start, s_end), nodes in zip(pieces, all_nodes):
@@ -200,15 +223,18 @@ def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
 
 
 #: (u, v) segments per edge of a trimming loop; 0: one closed edge per loop. Why not one
-#: edge per loop: OCC intersects pcurves (BRepCheck_Face::IntersectWires on writing's
-#: check, ShapeFix's self-intersection tests on reading) interval by interval, and a
-#: degree-1 pcurve has one C0 interval per segment, so a 64-segment loop against a
-#: 32-segment hole is 2048 interval pairs; short edges are first sorted out by their 2-D
-#: boxes. Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
-#: seconds, STEP written = shape + write + read back + BRepCheck): 0 -> 4.1 s, 4 -> 3.6 s
-#: (the analyzer alone 0.9 -> 0.4 s; the file 16 % larger), 1 (an edge per segment) ->
-#: 6.1 s (the file's per-edge entities dominate); results/cad.md has the ablation.
-EDGE_SEGMENTS = 4
+#: edge per loop: OCC intersects pcurves (BRepCheck_Face::IntersectWires in the check,
+#: ShapeFix's self-intersection tests when a file is read with healing) interval by
+#: interval, and a degree-1 pcurve has one C0 interval per segment, so a 64-segment loop
+#: against a 32-segment hole is 2048 interval pairs; short edges are first sorted out by
+#: their 2-D boxes. Why not one edge per segment: the file's per-edge entities dominate.
+#: Measured on benchmarks/bench_cad.py's patches (100, loops of 64 + 32 points; CPU
+#: seconds, STEP written = shape + write + read back + BRepCheck, the check without
+#: healing; two runs under load 6 to 11): 0 -> 4.4 / 3.9 s, 4 -> 4.5 / 4.3 s, 8 -> 4.0 /
+#: 4.3 s (14.6, 17.0, 15.7 MB): within the noise of each other; 8 for half the edges of 4
+#: and a smaller file. With healing on reading, earlier: 0 -> 4.1, 1 -> 6.1, 4 -> 3.6 s.
+#: results/cad.md has the latest ablation.
+EDGE_SEGMENTS = 8
 
 
 def _bspline_curve_3d(poles, weights, flat, degree):
@@ -252,18 +278,18 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
 
     from .occ import _array1
 
-    def polyline(i0: int, i1: int):  # points i0..i1 as a degree-1 B-spline (exact: no knot insertion)
-        poles2d = Array1_gp_Pnt2d(1, i1 - i0 + 1)
-        set_pole = poles2d.SetValue
-        for i, uv_i in enumerate(uv[i0:i1 + 1].tolist(), 1):
-            set_pole(i, gp_Pnt2d(*uv_i))
-        mult = np.ones(i1 - i0 + 1, dtype=int)
-        mult[0] = mult[-1] = 2
-        return Geom2d_BSplineCurve(poles2d, _array1(t[i0:i1 + 1], "float"), _array1(mult, "int"), 1, False)
-
     segments = EDGE_SEGMENTS if segments is None else segments
     count = len(uv) - 1
     curve = _bspline_curve_3d(*curve_3d)
+    # the whole loop as a degree-1 B-spline (exact: its poles are the points, its knots
+    # the chord parameters); an edge's pcurve is its Segment between two of its knots
+    poles2d = Array1_gp_Pnt2d(1, count + 1)
+    set_pole = poles2d.SetValue
+    for i, uv_i in enumerate(uv.tolist(), 1):
+        set_pole(i, gp_Pnt2d(*uv_i))
+    mult = np.ones(count + 1, dtype=int)
+    mult[0] = mult[-1] = 2
+    loop2d = Geom2d_BSplineCurve(poles2d, _array1(t, "float"), _array1(mult, "int"), 1, False)
     pieces = max(1, round(count / segments)) if segments else 1
     cuts = np.unique(np.linspace(0, count, pieces + 1).round().astype(int))
     builder = BRep_Builder()
@@ -276,14 +302,15 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
         # the curve passes exactly through its C0 poles at the polyline's points
         vertices = [BRepBuilderAPI_MakeVertex(curve.Value(float(t[c]))).Vertex() for c in cuts[:-1]]
         vertices.append(vertices[0])
-        ranges = list(zip(cuts[:-1], cuts[1:]))
+        ranges = list(zip(t[cuts[:-1]].tolist(), t[cuts[1:]].tolist()))
     for k, piece in enumerate(ranges):
         if piece is None:
-            maker, pc = BRepBuilderAPI_MakeEdge(curve), polyline(0, count)
+            maker, pc = BRepBuilderAPI_MakeEdge(curve), loop2d
         else:
-            a, b = float(t[piece[0]]), float(t[piece[1]])
-            c3, pc = curve.Copy(), polyline(*piece)
-            c3.Segment(a, b)  # at the curve's C0 knots: the same poles
+            a, b = piece
+            c3, pc = curve.Copy(), loop2d.Copy()
+            c3.Segment(a, b)  # at the curves' knots: the same poles
+            pc.Segment(a, b)
             maker = BRepBuilderAPI_MakeEdge(c3, vertices[k], vertices[k + 1], a, b)
         if not maker.IsDone():
             raise NurbskitError(f"OpenCASCADE could not make an edge of a trimming loop (error {maker.Error()})")
@@ -492,13 +519,18 @@ def _sew(faces, tolerance: float):
 
 # ---- checking --------------------------------------------------------------------------
 
-def check_shape(shape) -> dict:
-    """OCC's validity check (``BRepCheck_Analyzer``) and counts of the shape's parts."""
+def check_shape(shape, *, parallel: bool = True) -> dict:
+    """OCC's validity check (``BRepCheck_Analyzer``, with its geometric controls) and
+    counts of the shape's parts.
+
+    ``parallel``: the analyzer checks sub-shapes on OCC's thread pool (its
+    ``theIsParallel``; the same checks and verdict, in about half the wall time on two
+    cores)."""
     ocp()
     from OCP.BRepCheck import BRepCheck_Analyzer
 
     counts = count_shapes(shape)
-    return {"valid": bool(BRepCheck_Analyzer(shape).IsValid()), **counts}
+    return {"valid": bool(BRepCheck_Analyzer(shape, True, parallel).IsValid()), **counts}
 
 
 def count_shapes(shape) -> dict:
