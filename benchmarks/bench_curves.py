@@ -240,11 +240,18 @@ def figure(examples: list, path: Path) -> None:
             ax.plot(cp[:, 0], cp[:, 1], "o", c="#1f77b4", ms=2)
         ax.set_title(title, fontsize=8)
         ax.set_axis_off()
-    for ax in np.ravel(axes)[len(examples):]:
+    save_grid(fig, axes, len(examples), path, dpi=110)
+
+
+def save_grid(fig, axes, used: int, path: Path, dpi: int) -> None:
+    """Blank the unused panels of a figure grid, then write it (folders made) and close it."""
+    import matplotlib.pyplot as plt
+
+    for ax in np.ravel(axes)[used:]:
         ax.set_axis_off()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
 
 
@@ -276,12 +283,7 @@ def failure_figure(failures: list[dict], path: Path) -> None:
         ax.set_title(f"seed {r['seed']}, w {r['width']:g}: {r['true_curves']} true, {r['curves']} found\n"
                      f"{', '.join(r['classes'])}" + (" (ambiguous)" if r["ambiguous"] else ""), fontsize=7)
         ax.set_axis_off()
-    for ax in np.ravel(axes)[len(failures):]:
-        ax.set_axis_off()
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_grid(fig, axes, len(failures), path, dpi=90)
 
 
 def sklearn_digits(count: int):
