@@ -99,6 +99,9 @@ def _index_cdist(query: Tensor, reference: Tensor, chunk_bytes: int, count: int 
     return out
 
 
+PARALLEL_QUERY_MIN = 20_000  # neighbours (queries x k) below which one thread answers
+
+
 class NeighborIndex:
     """A search structure on a fixed reference cloud ``(M, D)``, built once, queried often.
 
@@ -137,7 +140,10 @@ class NeighborIndex:
             self._tree = kdtree(ref)
         qn = _as_numpy(q)
         _check_finite_numpy("query", qn)
-        _, index = self._tree.query(qn, k=k, workers=self.workers)
+        # cKDTree's worker threads cost more to hand off than a small query takes (a 400-point
+        # query: 1.0 ms of hand-off for 0.9 ms of search); the answer is the same either way.
+        workers = self.workers if qn.shape[0] * k >= PARALLEL_QUERY_MIN else 1
+        _, index = self._tree.query(qn, k=k, workers=workers)
         return torch.from_numpy(np.asarray(index, dtype=np.int64).reshape(q.shape[0], *((k,) if k > 1 else ()))).to(q.device)
 
     def query(self, query: Tensor) -> tuple[Tensor, Tensor]:

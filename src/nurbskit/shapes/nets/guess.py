@@ -279,8 +279,8 @@ def guess_surface(guess: dict, kind: str):
     e1, e2 = guess["frame"]["e1"], guess["frame"]["e2"]
     c = guess["profile"].control_points
     if kind == "revolution":
-        curve = NURBSCurve(o + c[:, :1] * e1 + c[:, 1:] * d, degree=DEGREE, knot_vector=profile_knots())
+        curve = NURBSCurve(o + c[:, :1] * e1 + c[:, 1:] * d, degree=DEGREE, knot_vector=profile_knots(), validate=False)
         return revolve(curve, o, d)
     t0, t1 = guess["extent"]
-    curve = NURBSCurve(o + c[:, :1] * e1 + c[:, 1:] * e2 + t0 * d, degree=DEGREE, knot_vector=profile_knots())
+    curve = NURBSCurve(o + c[:, :1] * e1 + c[:, 1:] * e2 + t0 * d, degree=DEGREE, knot_vector=profile_knots(), validate=False)
     return extrude(curve, d, t1 - t0)
