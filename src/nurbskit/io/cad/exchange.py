@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -210,27 +211,38 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
     status = reader.ReadFile(str(path))
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise InputError(f"{path}: OpenCASCADE could not read it as a {fmt.upper()} file ({status.name})")
-    if heal:
-        transferred = reader.TransferRoots()
-    else:
-        # the parameters live in the translator's actor, which OCC shares between readers
-        # of a format: put the previous ones back, or later reads would not heal either
-        from OCP.collections import DataMap_TCollection_AsciiString_TCollection_AsciiString as ParameterMap
-
-        saved = ParameterMap()
-        saved.Assign(reader.GetShapeFixParameters())
-        reader.SetShapeFixParameters(_check_fix_parameters(fmt))
-        try:
-            with _static_ints(CHECK_READ_STATICS[fmt]):
-                transferred = reader.TransferRoots()
-        finally:
-            reader.SetShapeFixParameters(saved)
+    with _TRANSLATOR_LOCK:
+        transferred = _transfer(reader, fmt, heal)
     if transferred == 0:
         raise InputError(f"{path}: the {fmt.upper()} file holds no shape OpenCASCADE can translate")
     shape = reader.OneShape()
     if shape.IsNull():
         raise InputError(f"{path}: the {fmt.upper()} file holds no shape")
     return shape
+
+
+#: OCC's translator settings are global to a process (the shape-fix parameters of a
+#: format's shared actor, ``Interface_Static``): a check's unhealed read and a user's
+#: healed one on another thread (the studio's) must not see each other's.
+_TRANSLATOR_LOCK = threading.Lock()
+
+
+def _transfer(reader, fmt: str, heal: bool) -> int:
+    """``reader.TransferRoots()``, healed as OCC does by default or, for the check, not."""
+    if heal:
+        return reader.TransferRoots()
+    # the parameters live in the translator's actor, which OCC shares between readers
+    # of a format: put the previous ones back, or later reads would not heal either
+    from OCP.collections import DataMap_TCollection_AsciiString_TCollection_AsciiString as ParameterMap
+
+    saved = ParameterMap()
+    saved.Assign(reader.GetShapeFixParameters())
+    reader.SetShapeFixParameters(_check_fix_parameters(fmt))
+    try:
+        with _static_ints(CHECK_READ_STATICS[fmt]):
+            return reader.TransferRoots()
+    finally:
+        reader.SetShapeFixParameters(saved)
 
 
 #: Reading back a file just written (the check of :func:`write_shape`), OCC's shape
