@@ -373,7 +373,8 @@ def format_cad_info(info: dict, max_faces: int = 50) -> str:
     if info.get("bbox"):
         lo, hi = info["bbox"]
         lines.append("  bbox min    " + " ".join(f"{x:.6g}" for x in lo))
-        lines.append("  bbox max    " + " ".join(f"{x:.6g}" for x in hi))
+        lines.append("  bbox max    " + " ".join(f"{x:.6g}" for x in hi)
+                     + "  (of the faces' control points: it holds the surfaces, loosely)")
     lines.append("  face  type                         degrees  control grid  rational  holes")
     for i, f in enumerate(info["faces"][:max_faces]):
         lines.append(f"  {i:4d}  {f['type']:<28} {f['degrees'][0]} x {f['degrees'][1]}    "
