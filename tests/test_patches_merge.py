@@ -126,7 +126,7 @@ def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
     """Two perpendicular faces and a 24-point strip along their edge, a region of its own.
 
     No merge is allowed (``crease_seam`` of 10 degrees: the strip's plane meets both faces
-    at 45 degrees), so without absorption the strip stays a third patch; its points lie
+    at 45 degrees; ``leftover=0``: a small part crosses no seam), so without absorption the strip stays a third patch; its points lie
     within eps of both faces' surfaces, so dissolving it lowers the energy and keeps them
     inliers.
     """
@@ -137,8 +137,8 @@ def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
                    np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
                             np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
     labels = np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
-    kept = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, absorb=0), init_labels=labels)
-    res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10), init_labels=labels)
+    kept = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, leftover=0, absorb=0), init_labels=labels)
+    res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, leftover=0), init_labels=labels)
     assert len(kept) == 3 and len(res) == 2
     absorbed = [h for h in res.history if h.get("reason") == "absorb" and h["accepted"]]
     assert len(absorbed) == 1 and absorbed[0]["a"] == 2 and absorbed[0]["held"] == 24

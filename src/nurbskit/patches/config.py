@@ -57,6 +57,16 @@ class PatchConfig:
         "a tight bend rounds a crease only where the patch's normal turns more than this many degrees away from the "
         "normal of the merged part the point came from (a fillet cut into planar strips stays within normal_angle)",
     )
+    leftover: float = _f(
+        0.05,
+        "a part of at most this fraction of the points (a leftover at an edge, a small cap) may merge across a steep "
+        "seam or a crease: the energy alone decides its merge (0: the seam and crease tests hold for every part)",
+    )
+    crease_inherit: bool = _f(
+        True,
+        "a pair whose parts contain both sides of a union already refused for rounding a crease is refused without "
+        "a fit (the crease lies between them too)",
+    )
     absorb: float = _f(
         0.05,
         "after the merges, a patch of at most this fraction of the points is dissolved into its neighbours (their "
@@ -67,6 +77,11 @@ class PatchConfig:
     )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
     fit_rounds: int = _f(5, "alternating projection + least-squares rounds of each candidate fit (accepted patches are refined later)")
+    fit_tolerance: float = _f(
+        1e-7,
+        "a candidate's alternation stops once a round lowers the mean squared distance by less than this fraction of "
+        "its first round's (the fit's own stopping rule; a candidate only has to be good enough to judge the merge)",
+    )
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")
@@ -106,6 +121,8 @@ class PatchConfig:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
         if not 0 <= self.absorb_held <= 1:
             raise OptionError(f"absorb_held: expected a fraction in [0, 1], got {self.absorb_held!r}")
+        if not 0 <= self.leftover <= 1:
+            raise OptionError(f"leftover: expected a fraction of the points in [0, 1], got {self.leftover!r}")
         if not 0 <= self.absorb <= 1:
             raise OptionError(f"absorb: expected a fraction of the points in [0, 1], got {self.absorb!r}")
         if not 0 <= self.crease_turned < 1:

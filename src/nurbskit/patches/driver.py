@@ -298,7 +298,16 @@ def fit_patches(
     cache: dict[tuple[int, int], _Region | None] = {}
     rejected: set[tuple[int, int]] = set()
     crease_log: dict[tuple[int, int], tuple[float, float, float]] = {}
-    counts = {"fits": 0, "candidates": 0, "accepted": 0, "seams": 0, "creases": 0, "skipped_quadric": 0, "retries": 0}
+    counts = {"fits": 0, "candidates": 0, "accepted": 0, "seams": 0, "creases": 0, "skipped_quadric": 0, "retries": 0,
+              "inherited": 0}
+    # planar-start regions of the two sides of every union refused for rounding a crease
+    creased: list[tuple[frozenset, frozenset]] = []
+    seam_diag: dict = {}
+
+    def holds_crease(a: int, b: int) -> bool:
+        """Whether a's and b's parts contain the two sides of a union already refused for a crease."""
+        oa, ob = set(regions[a].origin), set(regions[b].origin)
+        return any((sa <= oa and sb <= ob) or (sa <= ob and sb <= oa) for sa, sb in creased)
     next_id = s0
     while True:
         item = queue.pop()
@@ -316,7 +325,8 @@ def fit_patches(
             # parts meeting at a steep seam cannot be one smooth patch, however a fit would
             # round it: decided from the parts' own normals, before any fit
             seam = seam_angle(a, b)
-            if seam > cfg.crease_seam:
+            small = min(len(regions[a].members), len(regions[b].members)) <= cfg.leftover * n
+            if seam > cfg.crease_seam and not small:
                 cand = None
                 counts["seams"] += 1
                 crease_log[key] = (float("nan"), float("nan"), seam)
@@ -324,6 +334,16 @@ def fit_patches(
                 record = {"a": a, "b": b, "priority": e, "energy_before": u, "seam_angle": seam,
                           "accepted": False, "reason": "seam"}
                 history.append(record)
+                report("merge", counts["accepted"], s0 - 1)
+                continue
+            if cfg.crease_inherit and holds_crease(a, b):
+                # the crease a refused union rounded lies between a and b too: no smooth patch
+                # over a superset of that union can avoid rounding it
+                cache[key] = None
+                counts["inherited"] += 1
+                crease_log[key] = (float("nan"), float("nan"), seam)
+                history.append({"a": a, "b": b, "priority": e, "energy_before": u, "seam_angle": seam,
+                                "accepted": False, "reason": "crease (inherited)"})
                 report("merge", counts["accepted"], s0 - 1)
                 continue
             members = np.concatenate([regions[a].members, regions[b].members])
@@ -337,9 +357,21 @@ def fit_patches(
             tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
                                          model_normals=part_normals[ok], max_angle=cfg.crease_angle)
             crease_log[key] = (tight, turned, seam)
-            if tight > cfg.crease_fraction and turned > cfg.crease_turned:
+            # diagnostics: how the union treats the points along the seam
+            la = len(regions[a].members)
+            ja = (current[nb[regions[a].members]] == b).any(1)
+            jb = (current[nb[regions[b].members]] == a).any(1)
+            at = np.r_[ja, jb]
+            un = surface_normals(pf.surface, pf.params[at])
+            ang = np.degrees(np.arccos(np.clip(np.abs((un * part_normals[at]).sum(1)), 0, 1)))
+            seam_diag[key] = dict(fits=pf.fits, seam_pts=int(at.sum()), seam_turn_med=float(np.median(ang)) if len(ang) else 0.0,
+                                  seam_turn_p90=float(np.percentile(ang, 90)) if len(ang) else 0.0,
+                                  seam_dist=float(pf.distance[at].mean() / eps) if at.any() else 0.0,
+                                  rest_dist=float(pf.distance[~at].mean() / eps) if (~at).any() else 0.0)
+            if tight > cfg.crease_fraction and turned > cfg.crease_turned and not small:
                 cand = None
                 counts["creases"] += 1
+                creased.append((frozenset(regions[a].origin), frozenset(regions[b].origin)))
             else:
                 (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
                 cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
@@ -349,6 +381,7 @@ def fit_patches(
         record = {"a": a, "b": b, "priority": e, "energy_before": u}
         if key in crease_log:
             record["tight"], record["turned"], record["seam_angle"] = crease_log[key]
+        record.update(seam_diag.get(key, {}))
         if cand is None:
             record.update(accepted=False, reason="crease")
             history.append(record)
@@ -358,6 +391,10 @@ def fit_patches(
         new_total = _add(new_total, cand.contribution(eps))
         u_new, parts_new = energy(new_total, alive - 1, s0, n, cfg.weights)
         record.update(energy_after=u_new, ctrl=list(cand.surface.sizes), closed_v=cand.closed)
+        ca, cb, cu = regions[a].contribution(eps), regions[b].contribution(eps), cand.contribution(eps)
+        record.update(parts_in=ca.inliers + cb.inliers, union_in=cu.inliers, parts_dist=ca.distance + cb.distance,
+                      union_dist=cu.distance, size_a=len(regions[a].members), size_b=len(regions[b].members),
+                      origin_a=list(regions[a].origin), origin_b=list(regions[b].origin))
         if u_new < u:
             new = next_id
             next_id += 1
