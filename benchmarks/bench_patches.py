@@ -107,7 +107,8 @@ def main(argv=None) -> int:
     overrides = {}
     for item in args.set:
         key, _, value = item.partition("=")
-        overrides[key] = type(getattr(PatchConfig(), key))(value)
+        default = getattr(PatchConfig(), key)
+        overrides[key] = value.lower() in ("1", "true", "yes") if isinstance(default, bool) else type(default)(value)
     torch.set_num_threads(1)
     if args.merge:
         import json

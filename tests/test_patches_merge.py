@@ -161,3 +161,42 @@ def test_a_candidate_fit_reports_true_distances():
     assert pf.distance.shape == (2000,)
     assert np.max(np.abs(pf.distance - cold)) < 1e-6
     assert np.mean(pf.distance < 0.01) > 0.95  # and the fit is a fit
+
+
+def test_a_refused_crease_is_inherited_by_every_pair_holding_its_sides():
+    """contains_refused against a brute-force reading of its rule on random region sets."""
+    from nurbskit.patches.driver import contains_refused
+
+    rng = np.random.default_rng(6)
+    refused = [(frozenset({0, 1}), frozenset({2})), (frozenset({3}), frozenset({4, 5}))]
+    assert contains_refused([0, 1, 7], [2, 9], refused)
+    assert contains_refused([2], [0, 1], refused)  # either order
+    assert not contains_refused([0], [2], refused)  # a smaller side: not the refused union
+    assert not contains_refused([0, 1, 2], [9], refused)  # both sides in one part: no seam between them
+    for _ in range(200):
+        regions = rng.permutation(10)
+        k = rng.integers(1, 9)
+        a, b = list(regions[:k]), list(regions[k:])
+        brute = any(all(r in a for r in s) and all(r in b for r in t) or all(r in b for r in s) and all(r in a for r in t)
+                    for s, t in refused)
+        assert contains_refused(a, b, refused) == brute
+
+
+def test_a_small_leftover_crosses_a_steep_seam_but_two_faces_do_not():
+    """The leftover strip of the absorption case (24 of 1,224 points, at 45 degrees to both
+    faces) merges into a face across the 10-degree seam limit (the energy decides a
+    leftover's merge); the two faces (600 points each) still never merge."""
+    rng = np.random.default_rng(4)
+    a, b, c = rng.random((600, 2)), rng.random((600, 2)), rng.random((24, 2))
+    p = np.vstack([np.c_[0.01 + 0.99 * a[:, 0], a[:, 1], np.zeros(600)],
+                   np.c_[np.zeros(600), b[:, 1], 0.01 + 0.99 * b[:, 0]],
+                   np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
+                            np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
+    labels = np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
+    res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, absorb=0), init_labels=labels)
+    merged = [h for h in res.history if h["accepted"]]
+    assert len(merged) == 1 and 2 in (merged[0]["a"], merged[0]["b"]) and merged[0]["seam_angle"] > 10
+    assert len(res) == 2
+    for patch in res.patches:  # no patch holds both faces
+        assert not {0, 1} <= set(labels[patch.inliers])
+    assert res.metrics["completeness"] > 99

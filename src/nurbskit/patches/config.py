@@ -77,11 +77,6 @@ class PatchConfig:
     )
     fit_points: int = _f(800, "fit each candidate patch on at most this many of its points (seeded subset)")
     fit_rounds: int = _f(5, "alternating projection + least-squares rounds of each candidate fit (accepted patches are refined later)")
-    fit_tolerance: float = _f(
-        1e-7,
-        "a candidate's alternation stops once a round lowers the mean squared distance by less than this fraction of "
-        "its first round's (the fit's own stopping rule; a candidate only has to be good enough to judge the merge)",
-    )
     fit_iters: int = _f(0, "refinement iterations (the fit's default stage) of each candidate fit; 0: least squares only")
     final_iters: int = _f(15, "refinement iterations (the fit's default stage) of each final patch; 0: none")
     final_points: int = _f(1500, "fit each final patch on at most this many of its inliers")

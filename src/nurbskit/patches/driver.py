@@ -305,9 +305,7 @@ def fit_patches(
     seam_diag: dict = {}
 
     def holds_crease(a: int, b: int) -> bool:
-        """Whether a's and b's parts contain the two sides of a union already refused for a crease."""
-        oa, ob = set(regions[a].origin), set(regions[b].origin)
-        return any((sa <= oa and sb <= ob) or (sa <= ob and sb <= oa) for sa, sb in creased)
+        return contains_refused(regions[a].origin, regions[b].origin, creased)
     next_id = s0
     while True:
         item = queue.pop()
@@ -592,6 +590,23 @@ def fit_patches(
     counts["pushes"] = queue.pushes
     counts["merged_points"] = int(len(x))
     return PatchSet(patches, labels, full, nrm, labels0, cfg, eps, history, energies, m, planar, timings, counts)
+
+
+def contains_refused(a: list[int], b: list[int], refused: list[tuple[frozenset, frozenset]]) -> bool:
+    """Whether parts made of planar regions ``a`` and ``b`` hold both sides of a refused union.
+
+    ``refused`` lists ``(side, side)`` pairs of planar-region sets whose union was refused
+    for rounding a crease. When one side lies in ``a`` and the other in ``b``, the crease
+    runs between ``a`` and ``b`` too, and no smooth patch over ``a`` and ``b`` (a superset
+    of the refused union) can avoid rounding it: the pair is refused without a fit.
+
+    Example:
+        >>> refused = [(frozenset({1}), frozenset({2}))]
+        >>> contains_refused([1, 5], [2], refused), contains_refused([1, 2], [5], refused)
+        (True, False)
+    """
+    oa, ob = set(a), set(b)
+    return any((sa <= oa and sb <= ob) or (sa <= ob and sb <= oa) for sa, sb in refused)
 
 
 #: Bytes per input point of a run beyond the merge subset: the points, normals, labels,

@@ -131,7 +131,7 @@ def _fit_lsq(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg):
     surface, topology = initial_surface(xn, base.init.kind, ctrl, (cfg.degree, cfg.degree), "v" if closed else "open",
                                         base.init.smoothness)
     surface, params, _ = alternate(surface, xn, cfg.fit_rounds, topology, base.alternation.smoothness,
-                                   cfg.fit_tolerance)
+                                   base.alternation.tolerance)
     with torch.no_grad():
         if params is None:  # no rounds: project once
             params = project_points(surface, xn, periodic=(False, topology.closed_v)).params
@@ -201,7 +201,7 @@ def _fit_closed(points: np.ndarray, ctrl: tuple[int, int], cfg):
     surface = NURBSSurface(cp, surface.degrees, surface.knot_vectors, surface.weights)
     x = torch.as_tensor(points, dtype=torch.float64)
     if cfg.fit_rounds:
-        surface, p, _ = alternate(surface, x, cfg.fit_rounds, topology, 1e-3, max(1e-3, cfg.fit_tolerance))
+        surface, p, _ = alternate(surface, x, cfg.fit_rounds, topology, 1e-3, 1e-3)
     else:
         p = project_points(surface, x, periodic=(False, True)).params
     with torch.no_grad():
