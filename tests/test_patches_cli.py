@@ -98,3 +98,12 @@ def test_fit_patches_on_an_abc_cloud(shared_data):
     # measured on this subset: 6 patches, completeness and P_cov^i 98 %, IoU 69 %
     assert m["completeness"] > 90 and m["P_cov_i"] > 90 and m["iou"] > 55
     assert 2 <= m["N"] <= 10 < res.planar["planes"]
+
+
+def test_help_lists_every_option(capsys):
+    """--help prints (a percent sign in a field's help once broke argparse's formatting)."""
+    with pytest.raises(SystemExit) as exc:
+        main(["patches", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "--leftover" in out and "--crease-seam" in out and "1 %" in out

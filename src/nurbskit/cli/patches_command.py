@@ -27,7 +27,8 @@ from .export_command import add_format_option, write_requested_format
 
 
 def _help(name: str) -> str:
-    return next(f.metadata.get("help", "") for f in dataclasses.fields(PatchConfig) if f.name == name)
+    # argparse formats help with %: a literal percent sign in a field's help is doubled
+    return next(f.metadata.get("help", "") for f in dataclasses.fields(PatchConfig) if f.name == name).replace("%", "%%")
 
 
 def register(subparsers) -> None:
@@ -48,6 +49,8 @@ def register(subparsers) -> None:
     p.add_argument("--max-points", type=int, default=20_000, metavar="N", help=_help("max_points") + " (default 20000)")
     p.add_argument("--crease-seam", type=float, default=75.0, metavar="DEG",
                    help=_help("crease_seam") + " (default 75)")
+    p.add_argument("--leftover", type=float, default=0.05, metavar="F",
+                   help=_help("leftover") + " (default 0.05)")
     p.add_argument("--seed", type=int, default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
@@ -126,7 +129,8 @@ def run_patches(args) -> int:
 
     parse_device(args.device)  # the one device parser: a device that exists here, or one line
     cfg = PatchConfig(eps=args.eps, weights=weights, max_ctrl=args.max_ctrl, seed=args.seed, device=args.device,
-                      init=args.init, max_points=args.max_points, crease_seam=args.crease_seam)
+                      init=args.init, max_points=args.max_points, crease_seam=args.crease_seam,
+                      leftover=args.leftover)
     try:
         cfg.validate()
     except OptionError as exc:

@@ -48,7 +48,8 @@ class PatchConfig:
     crease_seam: float = _f(
         75.0,
         "two parts never merge when they meet at more than this many degrees (median angle of their "
-        "normals across the kNN links joining them), decided before any fit: sharp edges are kept; planar strips "
+        "normals across the kNN links joining them), decided before any fit, unless one is a leftover (see leftover): "
+        "sharp edges are kept; planar strips "
         "of a fillet meet at less (about 2 x normal_angle); 90: never refused on the angle alone, a sharp edge is "
         "judged by the energy and the crease test, as in the paper (fewer patches)",
     )
