@@ -13,8 +13,11 @@ Flow (one function per step, each in its own module):
    one NURBS patch (the project's fitting), its inliers found by true projection, and the
    merge kept only when the energy U decreases and the patch does not round a sharp crease
    (its parts meet at a steep seam, or it bends tighter than ``min_radius`` where it turns
-   away from its parts' own normals: a fillet cut into planar strips still merges); a rejected pair is tried again (with its cached fit) when a neighbour of it
-   changes;
+   away from its parts' own normals: a fillet cut into planar strips still merges); a
+   crease refusal is inherited, without a fit, by every later pair holding both its sides
+   (:func:`contains_refused`); a leftover of at most ``leftover`` of the points is exempt
+   from both tests (the energy alone decides); a rejected pair is tried again (with its
+   cached fit) when a neighbour of it changes;
 5. **finalise**: untouched planar regions become flat patches, outliers join a
    neighbouring patch they lie within ``eps`` of; a cloud larger than ``max_points`` ran
    steps 1-5 on a seeded subset, and now every input point is projected onto the patches
@@ -323,6 +326,8 @@ def fit_patches(
             # parts meeting at a steep seam cannot be one smooth patch, however a fit would
             # round it: decided from the parts' own normals, before any fit
             seam = seam_angle(a, b)
+            # a leftover (a strip or a cap at an edge, at most `leftover` of the points) is
+            # exempt from the seam and crease tests: the energy alone decides its merge
             small = min(len(regions[a].members), len(regions[b].members)) <= cfg.leftover * n
             if seam > cfg.crease_seam and not small:
                 cand = None
@@ -355,17 +360,17 @@ def fit_patches(
             tight, turned = crease_stats(pf.surface, pf.params[ok], cfg.min_radius * eps,
                                          model_normals=part_normals[ok], max_angle=cfg.crease_angle)
             crease_log[key] = (tight, turned, seam)
-            # diagnostics: how the union treats the points along the seam
-            la = len(regions[a].members)
-            ja = (current[nb[regions[a].members]] == b).any(1)
-            jb = (current[nb[regions[b].members]] == a).any(1)
-            at = np.r_[ja, jb]
+            # recorded in the history (not a test): how the union treats the points along the
+            # seam (points of one part with a kNN link into the other), for reading its decisions
+            at = np.r_[(current[nb[regions[a].members]] == b).any(1), (current[nb[regions[b].members]] == a).any(1)]
             un = surface_normals(pf.surface, pf.params[at])
             ang = np.degrees(np.arccos(np.clip(np.abs((un * part_normals[at]).sum(1)), 0, 1)))
-            seam_diag[key] = dict(fits=pf.fits, seam_pts=int(at.sum()), seam_turn_med=float(np.median(ang)) if len(ang) else 0.0,
-                                  seam_turn_p90=float(np.percentile(ang, 90)) if len(ang) else 0.0,
-                                  seam_dist=float(pf.distance[at].mean() / eps) if at.any() else 0.0,
-                                  rest_dist=float(pf.distance[~at].mean() / eps) if (~at).any() else 0.0)
+            seam_diag[key] = dict(
+                fits=pf.fits, seam_pts=int(at.sum()),
+                seam_turn_med=float(np.median(ang)) if len(ang) else 0.0,
+                seam_turn_p90=float(np.percentile(ang, 90)) if len(ang) else 0.0,
+                seam_dist=float(pf.distance[at].mean() / eps) if at.any() else 0.0,
+                rest_dist=float(pf.distance[~at].mean() / eps) if (~at).any() else 0.0)
             if tight > cfg.crease_fraction and turned > cfg.crease_turned and not small:
                 cand = None
                 counts["creases"] += 1
