@@ -47,6 +47,16 @@ refinement of the first ``--refine-count`` clouds per kind (2-3 CPU seconds each
 bulk of the run); the results are rewritten every 100 light or 20 refinement tasks, so a run stopped early leaves
 a consistent table, each row with its own count. Run it niced: the machine is shared.
 
+**Timing only** (``--timing-only``, the number the 10 ms goal is about): the network alone
+on ``--count`` world clouds per kind in one process of one torch thread, median CPU ms per
+cloud after a warm-up, and its aten operations and host reads per call
+(``nurbskit._opcount``, load-independent); with ``--compare SRC`` the nurbskit source tree
+``SRC`` (e.g. an export of the commit before a change: ``git archive COMMIT src | tar -x -C
+/tmp/old``) is timed too, the two alternating ``--rounds`` times in fresh processes so that
+both see the same load, and the ratio after / before is reported. Quiet-machine rerun:
+``PYTHONPATH=src python benchmarks/bench_shapes_nets.py --timing-only --count 100 --name
+shapes_nets_timing`` (add ``--compare /tmp/old/src --rounds 3`` for before/after).
+
 Run: ``PYTHONPATH=src nice -n 10 python benchmarks/bench_shapes_nets.py [--count 500]
 [--search-count 500] [--refine-count 500] [--canonical-count 500] [--jobs 2] [--geometric]
 [--no-refine] [--name shapes_nets]``. The committed run's counts are in its table (the
@@ -270,6 +280,88 @@ COLUMNS = [("kind", "kind"), ("input", "input"), ("method", "method"), ("count",
            ("ms_cpu", "ms / cloud, CPU"), ("ms_wall", "ms / cloud, wall"), ("ms_batched_cpu", "ms / cloud batched, CPU")]
 
 
+# --- network-alone timing (--timing-only) -----------------------------------------------
+
+
+def time_network_alone(count: int) -> dict:
+    """Per kind, in this process (one torch thread): the network alone (``network_alone``) on
+    world clouds ``0 .. count - 1`` after a warm-up cloud: median and p95 CPU ms
+    (``time.process_time``), median wall ms, and the aten operations and host reads of one
+    call (``nurbskit._opcount``, load-independent). Uses only what every version of the
+    learned path has (``initial_guess``, ``guess_surface``), so a worker run against an
+    older source tree times that tree."""
+    from nurbskit._opcount import OperationCounter
+
+    torch.set_num_threads(1)
+    out = {}
+    for kind in ("revolution", "extrusion"):
+        clouds = [world_cloud(kind, i).points for i in range(count)]
+        network_alone(world_cloud(kind, 99_999).points, kind)  # model load, first calls
+        cpu, wall = [], []
+        for points in clouds:
+            _, w, c = _timed(lambda: network_alone(points, kind))
+            cpu.append(c)
+            wall.append(w)
+        with OperationCounter() as ops:
+            network_alone(clouds[min(1, count - 1)], kind)
+        out[kind] = {"ms_cpu": 1000 * statistics.median(cpu), "ms_cpu_p95": 1000 * float(np.percentile(cpu, 95)),
+                     "ms_wall": 1000 * statistics.median(wall), "operations": ops.operations,
+                     "host_reads": ops.host_reads}
+    return out
+
+
+def timing_only(args) -> None:
+    """``--timing-only``: the network alone's time per cloud in one process, one thread; with
+    ``--compare SRC`` also that of the nurbskit source tree ``SRC`` (the version before a
+    change), the two run alternately ``--rounds`` times in fresh worker processes (this script
+    with ``--timing-worker`` and ``PYTHONPATH`` set to each tree), so that both see the same
+    load: medians over rounds of each round's median, and the ratio after / before."""
+    import json
+    import subprocess
+
+    here = str(Path(__file__).resolve().parents[1] / "src")
+    trees = [("after", here)] if args.compare is None else [("before", str(Path(args.compare).resolve())), ("after", here)]
+    rounds = {label: [] for label, _ in trees}
+    load_start = os.getloadavg()[0]
+    for r in range(args.rounds if args.compare else 1):
+        for label, src in trees:
+            env = dict(os.environ, PYTHONPATH=src, OMP_NUM_THREADS="1")
+            res = subprocess.run([sys.executable, __file__, "--timing-worker", "--count", str(args.count)],
+                                 env=env, check=True, capture_output=True, text=True)
+            rounds[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
+            print(label, r, rounds[label][-1], flush=True)
+    rows = []
+    for kind in ("revolution", "extrusion"):
+        for label, src in trees:
+            per = [x[kind] for x in rounds[label]]
+            rows.append({"kind": kind, "version": label, "source": src, "count": args.count, "rounds": len(per),
+                         "ms_cpu": statistics.median(x["ms_cpu"] for x in per),
+                         "ms_cpu_rounds": [round(x["ms_cpu"], 3) for x in per],
+                         "ms_wall": statistics.median(x["ms_wall"] for x in per),
+                         "operations": per[0]["operations"], "host_reads": per[0]["host_reads"]})
+        if args.compare:
+            before, after = rows[-2], rows[-1]
+            after["ratio_cpu"] = after["ms_cpu"] / before["ms_cpu"]
+            after["ratio_cpu_rounds"] = [round(a / b, 3) for a, b in zip(after["ms_cpu_rounds"], before["ms_cpu_rounds"])]
+            after["ratio_operations"] = after["operations"] / before["operations"]
+    cols = [("kind", "kind"), ("version", "version"), ("count", "clouds"), ("rounds", "rounds"),
+            ("ms_cpu", "ms / cloud, CPU (median of round medians)"), ("ms_cpu_rounds", "per round"),
+            ("ms_wall", "ms / cloud, wall"), ("operations", "aten ops / call"), ("host_reads", "host reads / call"),
+            ("ratio_cpu", "after / before, CPU"), ("ratio_cpu_rounds", "per round"),
+            ("ratio_operations", "after / before, ops")]
+    notes = (f"The network alone (initial_guess then guess_surface, direction from normals) on world clouds 0..{args.count - 1} "
+             "per kind (bench_shapes.py's definition, 2,000 points, 0.5 % noise), one process of one torch thread "
+             "per measurement, CPU time (time.process_time) per cloud after a warm-up cloud; operation counts by "
+             "nurbskit._opcount (one call, load-independent). "
+             + (f"Before = the nurbskit source tree {args.compare}, after = this tree, run alternately "
+                f"{args.rounds} times. " if args.compare else "")
+             + f"Load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end. "
+             "Goal (issue 11): <= 10 ms per cloud on the quiet machine.")
+    write_results(args.name, rows, cols, meta={"count": args.count, "rounds": args.rounds, "compare": args.compare,
+                                               "load_average_start": load_start, "load_average_end": os.getloadavg()[0]},
+                  title="Shapes: the network alone, time per cloud", notes=notes)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--count", type=int, default=40, help="world-pose clouds per kind (the issue: 500)")
@@ -283,7 +375,21 @@ def main(argv=None) -> None:
                     help="clouds per kind refined (the first ones; default --count): 2-3 CPU s each")
     ap.add_argument("--geometric", action="store_true", help="also the geometric start (fit_shape refine=False)")
     ap.add_argument("--name", default="shapes_nets", help="results file name (results/NAME.json, .md)")
+    ap.add_argument("--timing-only", action="store_true",
+                    help="only the network alone's time per cloud (and op counts), one process, one thread")
+    ap.add_argument("--compare", metavar="SRC", default=None,
+                    help="--timing-only: also time the nurbskit source tree SRC (before), alternating with this one")
+    ap.add_argument("--rounds", type=int, default=3, help="--timing-only --compare: alternations")
+    ap.add_argument("--timing-worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.timing_worker:
+        import json
+
+        print(json.dumps(time_network_alone(args.count)))
+        return
+    if args.timing_only:
+        timing_only(args)
+        return
     torch.set_num_threads(1)
     ccount = args.canonical_count or args.count
     load_start = os.getloadavg()[0]

@@ -11,6 +11,8 @@ import math
 import pytest
 import torch
 
+from _assert import assert_close
+
 from nurbskit.errors import InputError, OptionError
 from nurbskit.metrics import surface_distances
 from nurbskit.shapes import (
@@ -185,10 +187,29 @@ def test_real_cylinder_mesh(shared_data):
     assert fit.distance_mean < 2e-3  # the caps' sharp rims are rounded by the cubic profile
 
 
+def _assert_smooth_seam(fit, rtol: float = 1e-9):
+    """The fitted closed profile is periodic: its last ``p`` control points and weights are its
+    first ``p``, its knots unclamped, and the surface's points and first derivatives (along
+    the profile and along the sweep) agree on both sides of the seam (v at the domain's two
+    ends), to rounding: no corner where the ordering started."""
+    prof, p = fit.profile, fit.profile.degree
+    P, w, k = prof.control_points, prof.weights, prof.knot_vector
+    assert torch.equal(P[:p], P[-p:]) and torch.equal(w[:p], w[-p:])
+    assert not torch.equal(k[: p + 1], k[:1].expand(p + 1)), "clamped knots: the seam would be C0"
+    (u0, u1), (v0, v1) = fit.surface.domain
+    u = torch.linspace(u0, u1, 7, dtype=F64)
+    below = fit.surface.derivatives(torch.stack([u, torch.full_like(u, v1)], -1), 1)
+    above = fit.surface.derivatives(torch.stack([u, torch.full_like(u, v0)], -1), 1)
+    scale = float(below[:, 0, 1].norm(dim=-1).max())
+    for i, j in ((0, 0), (0, 1), (1, 0)):  # the point, d/dv (the profile's tangent), d/du
+        assert_close(below[:, i, j], above[:, i, j], atol=rtol * scale, rtol=0)
+
+
 @pytest.mark.parametrize("shape", ["torus", "ellipse", "square"])
 def test_closed_profiles_round_trip(shape):
     """A torus (a revolved circle) and closed extruded sections: the profile is detected
-    as closed, fitted with its ends tied, and the surface matches the truth."""
+    as closed, fitted as a periodic curve (smooth across its seam), and the surface
+    matches the truth."""
     from nurbskit.shapes.synthetic import torus_cloud, tube_cloud
 
     if shape == "torus":
@@ -197,8 +218,7 @@ def test_closed_profiles_round_trip(shape):
         c, kind = tube_cloud(800, 0.0, 2, section=shape), "extrusion"
     fit = fit_shape(c.points, kind, iterations=10)
     assert fit.closed
-    P = fit.profile.control_points
-    assert torch.equal(P[0], P[-1]) and float(fit.profile.weights[0]) == float(fit.profile.weights[-1])
+    _assert_smooth_seam(fit)
     assert axis_angle_degrees(fit.axis["direction"], c.axis_direction) < 0.1
     truth = c.surface.sample((30, 30)).reshape(-1, 3)
     # the square's corners are rounded by the cubic: a looser bound
@@ -268,7 +288,7 @@ def test_sparse_evenly_spaced_rings_close():
 def test_sparse_closed_extrusion_round_trip(section):
     """An extruded circle (12 points per ring) and rounded rectangle (20 per ring), 6 rings
     (the gap between the ordering's ends is one spacing, 0.52 and 0.27 of the extent):
-    the profile closes (last control point = first) and the surface follows the true
+    the profile closes (periodic, smooth across the seam) and the surface follows the true
     section between the samples (dense points of the truth to the fit)."""
     heights = torch.linspace(0, 1.5, 6, dtype=F64)
     if section == "circle":
@@ -280,15 +300,15 @@ def test_sparse_closed_extrusion_round_trip(section):
         ring, dense = _rounded_rectangle(20), _rounded_rectangle(400, offset=0.5)
     fit = fit_shape(_extrude_rings(ring, heights), "extrusion", iterations=10)
     assert fit.closed, "the profile was left open"
-    P = fit.profile.control_points
-    assert torch.equal(P[0], P[-1])
+    _assert_smooth_seam(fit)
     assert axis_angle_degrees(fit.axis["direction"], [0.0, 0.0, 1.0]) < 0.2
-    # few points per ring: the (clamped, C0-at-the-seam) cubic has at most half as many
-    # control points as the ring has points, and is an approximation between them
+    # few points per ring: the periodic cubic has at most half as many free control points
+    # as the ring has points, and is an approximation between them
     assert fit.distance_mean < 5e-3
     truth = _extrude_rings(dense, [0.3, 1.1])
     d = surface_distances(fit.surface, truth)
-    assert d["to_surface_mean"] < 5e-3 and d["to_surface_max"] < 2e-2, d
+    # the periodic seam: the C0 clamped fit of the last session was up to 1.2e-2 off (a corner)
+    assert d["to_surface_mean"] < 5e-3 and d["to_surface_max"] < 7.5e-3, d
 
 
 def test_real_cylinder_vertices_close(shared_data):

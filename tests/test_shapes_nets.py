@@ -308,7 +308,7 @@ def test_normals_direction_is_the_shape_packages_estimate():
     rel = normalise(vase.points)[0]
     sub = rel[torch.linspace(0, rel.shape[0] - 1, G.AXIS_POINTS, dtype=F64).round().long()]
     want = revolution_axis(sub, estimate_normals(sub, G.AXIS_NEIGHBOURS["revolution"]),
-                           iterations=G.AXIS_ITERATIONS).direction
+                           iterations=G.AXIS_ITERATIONS["revolution"]).direction
     got = initial_guess(vase.points, "revolution")["axis_direction"]
     assert_close(abs(got @ want), torch.tensor(1.0, dtype=F64), atol=1e-12)
 

@@ -86,7 +86,9 @@ class ShapeFit:
     profile_points: np.ndarray | None = None
     init: str = "geometric"
     closed: bool = False
-    """The profile closes (a torus, a tube): its last control point is its first."""
+    """The profile closes (a torus, a tube): a periodic curve, its last ``degree`` control points
+    (and weights) its first ones, C^{degree-1} across the seam (or, for a contract profile
+    given closed and clamped, its last control point its first)."""
     distances: Tensor | None = None
     """Each input point's distance to the surface over the diagonal ``(N,)`` (the error map)."""
     start_direction: list | None = None
@@ -236,25 +238,40 @@ def _angular_extent(phi: np.ndarray, min_gap: float = math.radians(20)) -> tuple
     return start, float(2 * math.pi - gaps[i])
 
 
-def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle):
+def _revolution_surface(o, a, e1, rz, weights, knots, degree, angle, validate: bool = True):
+    # validate=False inside the refinement: the profile's knots and (exponentiated) weights are
+    # valid by construction, and the checks read the host on every evaluation
     a = a / a.norm()
     e1 = _perpendicular(a, e1)
     prof = NURBSCurve(o + rz[:, :1] * e1 + rz[:, 1:2] * a, degree=degree, knot_vector=knots, weights=weights,
                       validate=False)
-    return revolve(prof, o, a, angle), e1
+    return revolve(prof, o, a, angle, validate=validate), e1
 
 
-def _closed(curve: NURBSCurve) -> bool:
-    """A profile closes when its first and last control points (and weights) coincide."""
+def _closing(curve: NURBSCurve) -> int:
+    """How many of the profile's last control points repeat its first ones (with their weights):
+    ``degree`` for a periodic profile (:func:`.profile.fit_profile`'s closed curves: unclamped
+    knots, C^{p-1} at the seam), 1 for a clamped profile whose ends meet (C0: a contract
+    profile may be one), 0 for an open one."""
     P, w = curve.control_points.detach(), curve.weights.detach()
     size = float((P.amax(0) - P.amin(0)).norm()) or 1.0
-    return bool(float((P[0] - P[-1]).norm()) <= 1e-9 * size and abs(float(w[0] - w[-1])) <= 1e-12)
+
+    def repeats(count: int) -> bool:
+        return bool(float((P[:count] - P[-count:]).norm(dim=-1).max()) <= 1e-9 * size
+                    and float((w[:count] - w[-count:]).abs().max()) <= 1e-12)
+
+    k, p = curve.knot_vector.detach(), curve.degree
+    clamped = bool((k[: p + 1] == k[0]).all())
+    if not clamped and p < P.shape[0] and repeats(p):
+        return p
+    return 1 if repeats(1) else 0
 
 
-def _free_profile(curve: NURBSCurve, closed: bool, refine: bool):
+def _free_profile(curve: NURBSCurve, wrap: int, refine: bool):
     """``(E, free control points, free log-weights)``: the refined unknowns, and the matrix
-    that expands them to the profile's (a closed profile keeps its last point tied to its first)."""
-    E = closing_matrix(curve.control_points.shape[0], closed)
+    that expands them to the profile's (a closed profile keeps its last ``wrap`` points tied
+    to its first, so it stays closed, and periodic, whatever the refinement does)."""
+    E = closing_matrix(curve.control_points.shape[0], wrap > 0, max(wrap, 1))
     m = E.shape[1]
     free = curve.control_points.detach()[:m].contiguous().clone().requires_grad_(refine)
     logw = curve.weights.detach()[:m].log().contiguous().clone().requires_grad_(refine)
@@ -300,16 +317,18 @@ def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int
     e1 = math.cos(start) * e1 + math.sin(start) * e2
     rz = torch.stack([r, z], -1)
     curve = fit_profile(rz.numpy()).curve if guess is None else guess["profile"]
-    closed = _closed(curve)
+    wrap = _closing(curve)
+    closed = wrap > 0
     knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
 
     o_t = o.detach().contiguous().clone().requires_grad_(refine)
     a_t = a.detach().contiguous().clone().requires_grad_(refine)
-    E, rz_free, logw = _free_profile(curve, closed, refine)
+    E, rz_free, logw = _free_profile(curve, wrap, refine)
 
     def build():
-        s, _ = _revolution_surface(o_t, a_t, e1, E @ rz_free, torch.exp(E @ logw), knots, degree, angle)
+        s, _ = _revolution_surface(o_t, a_t, e1, E @ rz_free, torch.exp(E @ logw), knots, degree, angle,
+                                   validate=False)
         return s
 
     evals, warm = (_lbfgs([o_t, a_t, rz_free, logw], build, p, iterations) if refine and iterations > 0
@@ -336,13 +355,13 @@ def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int
 # ---------------------------------------------------------------------------------------
 # extrusion
 # ---------------------------------------------------------------------------------------
-def _extrusion_surface(c, d, e1, xy, weights, knots, degree, t0, t1):
+def _extrusion_surface(c, d, e1, xy, weights, knots, degree, t0, t1, validate: bool = True):
     d = d / d.norm()
     e1 = _perpendicular(d, e1)
     e2 = torch.linalg.cross(d, e1, dim=-1)
     prof = NURBSCurve(c + xy[:, :1] * e1 + xy[:, 1:2] * e2 + t0 * d, degree=degree, knot_vector=knots,
                       weights=weights, validate=False)
-    return extrude(prof, d, t1 - t0), e1, e2
+    return extrude(prof, d, t1 - t0, validate=validate), e1, e2
 
 
 def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24,
@@ -373,19 +392,21 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
     xy = torch.stack([rel @ e1, rel @ e2], -1)
     t = rel @ d
     curve = fit_profile(xy.numpy()).curve if guess is None else guess["profile"]
-    closed = _closed(curve)
+    wrap = _closing(curve)
+    closed = wrap > 0
     knots, degree = curve.knot_vector, curve.degree
     diag = float((p.amax(0) - p.amin(0)).norm())
     t_lo, t_hi = (t.min(), t.max()) if guess is None or guess["extent"] is None else \
         (torch.tensor(guess["extent"][0], dtype=F64), torch.tensor(guess["extent"][1], dtype=F64))
 
     d_t = d.detach().contiguous().clone().requires_grad_(refine)
-    E, xy_free, logw = _free_profile(curve, closed, refine)
+    E, xy_free, logw = _free_profile(curve, wrap, refine)
     t0 = t_lo.detach().clone().requires_grad_(refine)
     t1 = t_hi.detach().clone().requires_grad_(refine)
 
     def build():
-        s, _, _ = _extrusion_surface(c, d_t, e1, E @ xy_free, torch.exp(E @ logw), knots, degree, t0, t1)
+        s, _, _ = _extrusion_surface(c, d_t, e1, E @ xy_free, torch.exp(E @ logw), knots, degree, t0, t1,
+                                     validate=False)
         return s
 
     evals, warm = (_lbfgs([d_t, xy_free, logw, t0, t1], build, p, iterations) if refine and iterations > 0

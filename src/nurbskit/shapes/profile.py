@@ -20,8 +20,15 @@
 
 Convention: points ``(N, 2)`` float64; parameters in [0, 1]. Closed profiles (a torus's
 circle, a tube's section) are detected when the ordering's two ends meet
-(:func:`is_closed`) and fitted as clamped curves whose last control point is tied to the
-first: closed exactly, C0 at the seam (the seam's second difference is penalised).
+(:func:`is_closed`) and fitted as **periodic** curves: uniform unclamped knots
+(:func:`nurbskit.fit.params.periodic_knots`, the core's periodic knot vector: domain
+[0, 1], spacing ``1 / (n - p)``) with the last ``p`` control points (and weights) tied
+to the first ``p`` (:func:`closing_matrix` with ``wrap=p``), so the curve is closed and
+C^{p-1} across the seam (C2 for the cubic): no corner where the ordering happened to
+start. The parameters go round the loop by chord length, the gap between the ordering's
+ends included (the seam is a span like any other). :func:`nurbskit.io.cad` writes such a
+curve as OpenCASCADE's periodic B-spline, and the projection detects it as periodic
+(:func:`nurbskit.core.project.periodic_directions`).
 """
 
 from __future__ import annotations
@@ -39,7 +46,8 @@ from ..errors import InputError
 
 Tensor = torch.Tensor
 
-__all__ = ["order_points", "order_polyline", "Ordering", "fit_curve_lsq", "fit_profile", "ProfileFit", "is_closed", "closing_matrix"]
+__all__ = ["order_points", "order_polyline", "Ordering", "fit_curve_lsq", "fit_profile", "ProfileFit", "is_closed", "closing_matrix",
+           "periodic_profile_knots"]
 
 LADDER = (6, 8, 11, 15, 20, 26, 34)
 BAND_SPANS = 6.0
@@ -145,37 +153,63 @@ def _quantile_knots(u: Tensor, n_ctrl: int, degree: int) -> Tensor:
     return torch.cat([zeros, inner, ones])
 
 
-def closing_matrix(n_ctrl: int, closed: bool) -> Tensor:
-    """``E (n_ctrl, m)``: control points ``E @ free``; for a closed curve ``m = n_ctrl - 1``
-    and the last control point is the first (a clamped curve whose ends meet)."""
+def closing_matrix(n_ctrl: int, closed: bool, wrap: int = 1) -> Tensor:
+    """``E (n_ctrl, m)``: control points ``E @ free``.
+
+    Open: ``m = n_ctrl``, ``E`` the identity. Closed: ``m = n_ctrl - wrap`` and the last
+    ``wrap`` control points repeat the first ``wrap`` (control point ``j`` is free unknown
+    ``j mod m``): ``wrap = 1`` is a clamped curve whose ends meet (C0 at the seam),
+    ``wrap = degree`` with periodic knots a periodic curve (C^{degree-1} at the seam).
+
+    Example:
+        >>> closing_matrix(5, True, wrap=2).argmax(1).tolist()
+        [0, 1, 2, 0, 1]
+    """
     E = torch.eye(n_ctrl, dtype=torch.float64)
     if not closed:
         return E
-    E = E[:, :-1].clone()
-    E[-1, 0] = 1.0
-    return E
+    m = n_ctrl - wrap
+    if not 0 < wrap < n_ctrl:
+        raise InputError(f"a closed curve of {n_ctrl} control points cannot repeat {wrap} of them")
+    return E[:, :m][torch.arange(n_ctrl) % m].clone()
+
+
+def periodic_profile_knots(n_ctrl: int, degree: int) -> Tensor:
+    """The periodic knot vector of a closed profile: the core's uniform unclamped knots
+    (:func:`nurbskit.fit.params.periodic_knots`, domain [0, 1]), float64, with the ``degree``
+    knots beyond each end of the domain set to the inner knots shifted by one period, so
+    that they match OpenCASCADE's periodic knots to the bit (``(i - p) / s`` and
+    ``(i - p + s) / s - 1`` can differ in the last place; :mod:`nurbskit.io.cad` writes a
+    spline as periodic only when they agree exactly, else as the same geometry unclamped)."""
+    from ..fit.params import periodic_knots
+
+    k = periodic_knots(n_ctrl, degree, dtype=torch.float64)
+    p, n = degree, n_ctrl
+    period = k[n] - k[p]
+    return torch.cat([k[n - p : n] - period, k[p : n + 1], k[p + 1 : 2 * p + 1] + period])
 
 
 def fit_curve_lsq(points, params, n_ctrl: int, degree: int = 3, *, knots: Tensor | None = None,
                   smoothing: float = 1e-6, closed: bool = False) -> NURBSCurve:
     """Least-squares B-spline ``NURBSCurve`` through ``points (N, D)`` at ``params (N,)`` in [0, 1].
 
-    ``knots`` default to parameter quantiles; ``smoothing`` weighs the second differences of
-    the control points relative to the data term's scale. ``closed``: the last control
-    point is tied to the first (the curve closes, C0 at the seam; the second difference
-    across the seam is penalised too).
+    ``knots`` default to parameter quantiles (open) or the periodic knots
+    (:func:`periodic_profile_knots`, closed); ``smoothing`` weighs the second differences
+    of the control points relative to the data term's scale. ``closed``: a periodic curve,
+    ``n_ctrl`` counting the ``degree`` control points that repeat the first ones (so
+    ``n_ctrl - degree`` are free; module docstring); the second differences run round the
+    seam.
     """
     x = torch.as_tensor(points, dtype=torch.float64)
     u = torch.as_tensor(params, dtype=torch.float64).clamp(0, 1)
-    kv = _quantile_knots(u, n_ctrl, degree) if knots is None else knots
-    E = closing_matrix(n_ctrl, closed)
+    if knots is not None:
+        kv = knots
+    else:
+        kv = periodic_profile_knots(n_ctrl, degree) if closed else _quantile_knots(u, n_ctrl, degree)
+    E = closing_matrix(n_ctrl, closed, degree)
     B = basis_matrix(kv, degree, n_ctrl, u) @ E  # (N, m)
-    D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0)
-    if closed:  # P[n-2] - 2 P[0] + P[1] across the seam (P[n-1] = P[0])
-        wrap = torch.zeros(1, n_ctrl, dtype=torch.float64)
-        wrap[0, n_ctrl - 2], wrap[0, 0], wrap[0, 1] = 1.0, -2.0, 1.0
-        D = torch.cat([D, wrap])
-    D = D @ E
+    # on the wrapped net the consecutive second differences already cross the seam
+    D = torch.diff(torch.eye(n_ctrl, dtype=torch.float64), n=2, dim=0) @ E
     BtB = B.T @ B
     lam = smoothing * float(BtB.diagonal().mean())
     m = E.shape[1]
@@ -191,7 +225,7 @@ class ProfileFit(NamedTuple):
     residual_mean: float
     """Mean distance of the points to the curve (after parameter correction)."""
     closed: bool = False
-    """The curve closes (its last control point is its first)."""
+    """The curve is closed and periodic (its last ``degree`` control points repeat its first)."""
 
 
 CLOSE_SPACINGS = 8.0
@@ -233,6 +267,14 @@ def is_closed(xy, params=None, ordering: Ordering | None = None) -> bool:
     return bool(gap <= CLOSE_SPACINGS * spacing and gap <= CLOSE_LOOP * loop and loop > 2 * ext)
 
 
+def _loop_share(polyline: np.ndarray) -> float:
+    """The polyline's share of its closed loop (the polyline and the gap between its ends):
+    a closed curve's chord-length parameters stop short of 1 by the gap's share."""
+    length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
+    gap = float(np.linalg.norm(polyline[-1] - polyline[0]))
+    return length / max(length + gap, 1e-300)
+
+
 def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2, closed: bool | None = None) -> ProfileFit:
     """Order ``xy (N, 2)`` and fit the profile curve (module docstring).
 
@@ -244,6 +286,8 @@ def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2, closed
     u0 = torch.as_tensor(ordering.params, dtype=torch.float64)
     if closed is None:
         closed = is_closed(x.numpy(), ordering=ordering)
+    if closed:
+        u0 = u0 * _loop_share(ordering.polyline)
     N = x.shape[0]
     scale = float((x.amax(0) - x.amin(0)).norm()) ** 2
     fits, bic = [], []
@@ -251,28 +295,33 @@ def fit_profile(xy, degree: int = 3, ladder=LADDER, corrections: int = 2, closed
     # cannot pin more control points than its distinct positions: the curve would swing
     # between them
     nodes = ordering.polyline.shape[0]
+    # a closed curve's rung counts its free control points (n_ctrl = n + degree, the last
+    # degree repeating the first): the same unknowns and spans as an open rung of n
+    periodic = (True,) if closed else (False,)
     for n in ladder:
         if n > max(degree + 1, min(N // 4, int(NODE_FRACTION * nodes))):
             break
+        n_ctrl = n + degree if closed else n
         u = u0
-        curve = fit_curve_lsq(x, u, n, degree, closed=closed)
+        curve = fit_curve_lsq(x, u, n_ctrl, degree, closed=closed)
         for c in range(corrections):
             # the first correction also restarts from the grid (the chord-length start can
             # sit in the wrong basin); later ones move little, warm starts suffice
             u = project_points_curve(curve, x, params=u, restart=c == 0 or not FAST_CORRECTIONS,
-                                     check_every=CHECK_EVERY).params
-            curve = fit_curve_lsq(x, u, n, degree, knots=curve.knot_vector, closed=closed)
-        dist = project_points_curve(curve, x, params=u, check_every=CHECK_EVERY).distance
+                                     check_every=CHECK_EVERY, periodic=periodic).params
+            curve = fit_curve_lsq(x, u, n_ctrl, degree, knots=curve.knot_vector, closed=closed)
+        dist = project_points_curve(curve, x, params=u, check_every=CHECK_EVERY, periodic=periodic).distance
         msq = float((dist ** 2).mean())
         # knot spans shorter than a few times the noise band's width let the curve zig-zag
         # through the noise (its residual then falls below the noise): stop the ladder there
+        spans = n_ctrl - degree
         length = float(curve.evaluate(torch.linspace(0, 1, 200, dtype=torch.float64)).diff(dim=0).norm(dim=-1).sum())
-        if fits and length / (n - degree) < BAND_SPANS * msq ** 0.5:
+        if fits and length / spans < BAND_SPANS * msq ** 0.5:
             break
         fits.append(ProfileFit(curve, u, float(dist.mean()), closed))
         # Bayesian information criterion (Schwarz 1978): N log(mean squared residual) + k log N
-        # with k = 2 n unknowns: more control points must pay for themselves
-        bic.append(N * np.log(max(msq / scale, 1e-30)) + 2 * curve.control_points.shape[0] * np.log(N))
+        # with k = 2 n unknowns (the free control points): more must pay for themselves
+        bic.append(N * np.log(max(msq / scale, 1e-30)) + 2 * n * np.log(N))
         # the criterion rises once the residual has reached the noise: stop after
         # PATIENCE rungs without a new minimum (the later rungs cost the most)
         if PATIENCE and len(bic) - 1 - int(np.argmin(bic)) >= PATIENCE:
