@@ -467,11 +467,13 @@ def _grid_products(Pw: Tensor, ops: Sequence[Tensor], k: int, kron: bool) -> Ten
 class _SurfaceGrid(torch.autograd.Function):
     """A rational surface on a grid through two basis matrices, with a hand-written backward.
 
-    ``cp (n_u, *mid, n_v, dim)``, ``w (n_u, *mid, n_v)``, ``Bu (R, n_u)``, ``BvT (n_v, S)`` ->
-    ``(R, *mid, S, dim)``; ``mid`` is ``()`` or a batch axis ridden along.
+    ``cp ([Bt,] n_u, n_v, dim)``, ``w ([Bt,] n_u, n_v)``, ``Bu (R, n_u)``, ``BvT (n_v, S)`` ->
+    ``([Bt,] R, S, dim)``: one surface, or a batch of ``Bt`` sharing the basis.
 
-    Forward: ``Pw = (w P, w)`` laid out ``(n_u, *mid, D, n_v)`` (channel rows), then
-    ``X = Pw B_v^T`` as one GEMM over all ``n_u * mid * D`` rows, ``H = Bu X`` as one GEMM,
+    Forward: ``Pw = (w P, w)`` laid out ``([Bt,] n_u, D, n_v)`` (channel rows), then
+    ``X = Pw B_v^T`` as one GEMM over all ``Bt * n_u * D`` rows, ``H = B_u X`` (one GEMM, or
+    for a batch one ``bmm`` with ``B_u`` broadcast at stride 0: on a CPU twice as fast as a
+    single ``(R, n_u) x (n_u, Bt * D * S)`` GEMM, whose output rows span the whole batch),
     and the division of whole channel rows of ``H`` by its weight row, in place (no new
     buffer the size of the grid); the result is a transposed view, channel last.
 
@@ -479,21 +481,24 @@ class _SurfaceGrid(torch.autograd.Function):
     ``dH = (G, -sum_c G_c out_c) / den`` written into one buffer (no concatenation, no
     temporary per channel), the two GEMMs transposed, and the product rule of
     ``(w P, w)`` on the (small) control net. When the basis matrices need gradients
-    (trainable knots or parameters), ``dBu = dH X^T`` and ``dBv^T = Pw^T dX``: two more
-    GEMMs of the same size, instead of autograd through a division broadcast over a
-    channel-last grid (what made the knot path 1.3 to 2.2x slower than before issue 16).
+    (trainable knots or parameters), ``dB_u = dH X^T`` and ``dB_v^T = Pw^T dX``: GEMMs of
+    the same size, instead of autograd through a division broadcast over a channel-last
+    grid (what made the knot path 1.3 to 2.2x slower than before issue 16).
     """
 
     @staticmethod
     def forward(ctx, cp, w, Bu, BvT):
         wT = w.unsqueeze(-2)
-        Pw = torch.cat([cp.transpose(-1, -2) * wT, wT], dim=-2)  # (n_u, *mid, D, n_v)
-        D, n_u, S = Pw.shape[-2], Bu.shape[1], BvT.shape[1]
-        X = Pw.view(-1, Pw.shape[-1]).mm(BvT)  # (n_u * mid * D, S): contracts v
-        H = Bu.mm(X.view(n_u, -1))  # (R, mid * D * S): contracts u
-        H = H.view((Bu.shape[0],) + cp.shape[1:-2] + (D, S))
-        num, den = H.split([D - 1, 1], dim=-2)
-        out = num.div_(den)  # (R, *mid, dim, S), a view of H: the rows do not overlap
+        Pw = torch.cat([cp.transpose(-1, -2) * wT, wT], dim=-2)  # ([Bt,] n_u, D, n_v)
+        R, n_u, S = Bu.shape[0], Bu.shape[1], BvT.shape[1]
+        D, lead = Pw.shape[-2], cp.shape[:-3]
+        X = Pw.view(-1, Pw.shape[-1]).mm(BvT)  # ([Bt *] n_u * D, S): contracts v
+        if lead:
+            H = torch.bmm(Bu.expand(lead[0], R, n_u), X.view(lead[0], n_u, D * S))  # (Bt, R, D * S)
+        else:
+            H = Bu.mm(X.view(n_u, D * S))  # (R, D * S): contracts u
+        num, den = H.view(lead + (R, D, S)).split([D - 1, 1], dim=-2)
+        out = num.div_(den)  # ([Bt,] R, dim, S), a view of H: the rows do not overlap
         ctx.save_for_backward(cp, w, Bu, BvT, out, den,
                               X if ctx.needs_input_grad[2] else None,
                               Pw if ctx.needs_input_grad[3] else None)
@@ -503,7 +508,8 @@ class _SurfaceGrid(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, G):
         cp, w, Bu, BvT, out, den, X, Pw = ctx.saved_tensors
-        R, S, dim = Bu.shape[0], BvT.shape[1], cp.shape[-1]
+        R, n_u, S, dim = Bu.shape[0], Bu.shape[1], BvT.shape[1], cp.shape[-1]
+        lead = cp.shape[:-3]
         dH = G.new_empty(out.shape[:-2] + (dim + 1, S))
         gnum, gden = dH.split([dim, 1], dim=-2)
         torch.div(G.transpose(-1, -2), den, out=gnum)
@@ -514,14 +520,24 @@ class _SurfaceGrid(torch.autograd.Function):
         else:
             torch.sum(gnum * out, dim=-2, keepdim=True, out=gden)
         gden.neg_()
-        dH2 = dH.view(R, -1)
-        dX = Bu.t().mm(dH2)  # (n_u, mid * D * S)
+        if lead:
+            dH2 = dH.view(lead[0], R, -1)
+            dX = torch.bmm(Bu.t().expand(lead[0], n_u, R), dH2)  # (Bt, n_u, D * S)
+        else:
+            dH2 = dH.view(R, -1)
+            dX = Bu.t().mm(dH2)  # (n_u, D * S)
         dPw = dX.view(-1, S).mm(BvT.t()).view(cp.shape[:-2] + (dim + 1, cp.shape[-2]))
-        gP, gw = dPw.split([dim, 1], dim=-2)  # (n_u, *mid, dim, n_v), (n_u, *mid, 1, n_v)
+        gP, gw = dPw.split([dim, 1], dim=-2)  # ([Bt,] n_u, dim, n_v), ([Bt,] n_u, 1, n_v)
         dcp = (gP * w.unsqueeze(-2)).transpose(-1, -2) if ctx.needs_input_grad[0] else None
         dw = (gP * cp.transpose(-1, -2)).sum(-2) + gw.squeeze(-2) if ctx.needs_input_grad[1] else None
-        dBu = dH2.mm(X.view(Bu.shape[1], -1).t()) if X is not None else None
-        dBvT = Pw.view(-1, Pw.shape[-1]).t().mm(dX.view(-1, S)) if Pw is not None else None
+        dBu = dBvT = None
+        if X is not None:
+            if lead:
+                dBu = torch.bmm(dH2, X.view(lead[0], n_u, -1).transpose(1, 2)).sum(0)
+            else:
+                dBu = dH2.mm(X.view(n_u, -1).t())
+        if Pw is not None:
+            dBvT = Pw.view(-1, Pw.shape[-1]).t().mm(dX.view(-1, S))
         return dcp, dw, dBu, dBvT
 
 
@@ -557,13 +573,13 @@ def _grid(control_points, weights, knot_vectors, degrees, axes, order: int) -> T
         # matrices (cached when fixed, rebuilt differentiably when the knots or the
         # parameters train), one autograd node.
         Bu, BvT = _grid_operators(knot_vectors, degrees, sizes, axes, order, D, kron_last=False)
-        cp, w = control_points, weights
-        if B:
-            Bt = math.prod(B)
-            cp = cp.reshape((Bt,) + sizes + (D - 1,)).movedim(0, 1)
-            w = w.reshape((Bt,) + sizes).movedim(0, 1)
-        out = _SurfaceGrid.apply(cp, w, Bu, BvT)  # (R, [Bt,] S, dim)
-        return out.movedim(1, 0).reshape(B + out.shape[:1] + out.shape[2:]) if B else out
+        if len(B) > 1:
+            control_points = control_points.reshape((-1,) + sizes + (D - 1,))
+            weights = weights.reshape((-1,) + sizes)
+        elif B and weights.ndim == k:  # weights shared by the batch
+            weights = weights.expand(B + sizes)
+        out = _SurfaceGrid.apply(control_points, weights, Bu, BvT)  # ([Bt,] R, S, dim)
+        return out.reshape(B + out.shape[-3:]) if len(B) > 1 else out
     ops = _grid_operators(knot_vectors, degrees, sizes, axes, order, D)
     if kron and k >= 2 and all(op.ndim == 2 for op in ops):
         # Shared operators: the batch rides behind the first direction (a cheap permuted
