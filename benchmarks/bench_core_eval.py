@@ -21,7 +21,11 @@ Peers in the same process:
 * a floor: the two dense matrix products a grid needs at least,
   ``(R x n)(n x n D)`` and ``(R D x n)(n x R)`` on precomputed operands.
 
-Usage: python benchmarks/bench_core_eval.py [--quick] [--device cpu|cuda] [--peer PATH]
+Loop overhead (the batch part): the loop's per-surface cost beyond the arithmetic, timed on a
+2 x 2 grid, and the ceiling ``(arithmetic + 64 x overhead) / arithmetic`` it allows the
+batch-vs-loop ratio (see ``loop_overhead``).
+
+Usage: python benchmarks/bench_core_eval.py [--quick] [--device cpu|cuda] [--threads N] [--only grids|batch] [--peer PATH]
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import timeit, write_results  # noqa: E402
 
 from nurbskit import NURBSSurface  # noqa: E402
+from nurbskit._opcount import OperationCounter  # noqa: E402
 from nurbskit.core import to_geomdl  # noqa: E402
 
 DEFAULT_PEER = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "nurbsdiff_v2"
@@ -179,6 +184,68 @@ def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict
     return rows
 
 
+def loop_overhead(batch, singles, cp, w, r: int, reps: int, sync) -> dict:
+    """What a loop pays per surface beyond the arithmetic, and the batch-vs-loop ceiling it allows.
+
+    The loop's body (``_replace``, ``sample``, ``square``, ``sum``, the running total, and
+    their backward nodes) is timed on a 2 x 2 grid, where the arithmetic is nothing: that
+    is the per-call overhead. The arithmetic is the batched call's time less its own
+    overhead (the batched call on a 2 x 2 grid). If the batch removed all of the loop's
+    overhead and did the loop's arithmetic, the loop would take at most
+    ``(arithmetic + 64 x overhead) / arithmetic`` times the batch: the ceiling of the ratio.
+    Operations per loop iteration are counted with ``OperationCounter`` (they do not
+    depend on the load).
+    """
+    count = len(singles)
+
+    def looped(res):
+        def run():
+            cp.grad = w.grad = None
+            total = 0
+            for i, s in enumerate(singles):
+                total = total + s._replace(control_points=cp[i], weights=w[i]).sample(res).square().sum()
+            total.backward()
+        return run
+
+    def batched(res):
+        def run():
+            cp.grad = w.grad = None
+            batch._replace(control_points=cp, weights=w).sample(res).square().sum().backward()
+        return run
+
+    with torch.no_grad():
+        looped_f = timeit(lambda: [s.sample(2) for s in singles], repeats=reps, min_time=0.05, sync=sync)
+        batched_f = timeit(lambda: batch.sample(2), repeats=reps, min_time=0.05, sync=sync)
+    looped_tiny = timeit(looped(2), repeats=reps, min_time=0.05, sync=sync)
+    batched_tiny = timeit(batched(2), repeats=reps, min_time=0.05, sync=sync)
+    batched_full = timeit(batched(r), repeats=reps, min_time=0.05, sync=sync)
+    with torch.no_grad():
+        batched_full_f = timeit(lambda: batch.sample(r), repeats=reps, min_time=0.05, sync=sync)
+    s0 = singles[0]
+    s0.sample(r)
+    with OperationCounter() as fwd_ops:
+        with torch.no_grad():
+            s0.sample(r)
+    with OperationCounter() as body_ops:
+        total = s0._replace(control_points=cp[0], weights=w[0]).sample(r).square().sum()
+        total = total + 0
+    with OperationCounter() as bwd_ops:
+        total.backward()
+    cp.grad = w.grad = None
+    arith_fb = batched_full - batched_tiny
+    arith_f = batched_full_f - batched_f
+    return {
+        "loop_overhead_us_per_surface_fwd": (looped_f - batched_f) / count * 1e6,
+        "loop_overhead_us_per_surface_fwd_bwd": (looped_tiny - batched_tiny) / count * 1e6,
+        "loop_ops_per_surface_fwd": fwd_ops.operations,
+        "loop_ops_per_surface_fwd_bwd": body_ops.operations + bwd_ops.operations,
+        "arithmetic_ms_fwd": arith_f * 1e3,
+        "arithmetic_ms_fwd_bwd": arith_fb * 1e3,
+        "ceiling_x_loop_fwd": (arith_f + (looped_f - batched_f)) / arith_f,
+        "ceiling_x_loop_fwd_bwd": (arith_fb + (looped_tiny - batched_tiny)) / arith_fb,
+    }
+
+
 def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
     """64 surfaces of 16 x 16 at 128^2: one batched call against a loop over the surfaces."""
     sync = torch.cuda.synchronize if device.startswith("cuda") else None
@@ -220,6 +287,7 @@ def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
            "max_abs_diff_batch_vs_loop": diff}
     row["x_loop_forward"] = row["looped_forward_ms"] / row["batched_forward_ms"]
     row["x_loop_fwd_bwd"] = row["looped_fwd_bwd_ms"] / row["batched_fwd_bwd_ms"]
+    row.update(loop_overhead(batch, singles, cp, w, r, reps, sync))
     if SurfEval is not None:
         layer = SurfEval(15, 15, dimension=3, p=3, q=3, out_dim_u=r, out_dim_v=r, device=device)
         Pg = homogeneous(batch).detach().clone().requires_grad_()
@@ -239,13 +307,14 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--peer", type=Path, default=DEFAULT_PEER, help="folder holding NURBSDiff (NURBS-Diff v2)")
+    parser.add_argument("--only", choices=["grids", "batch"], help="run one part (writes only its results file)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     SurfEval, reason = load_peer(args.peer)
     if SurfEval is None:
         print(f"NURBS-Diff skipped: {reason}", flush=True)
-    rows = run_grids(args.quick, args.device, SurfEval, reason)
-    batch_rows = run_batch(args.quick, args.device, SurfEval)
+    rows = run_grids(args.quick, args.device, SurfEval, reason) if args.only != "batch" else []
+    batch_rows = run_batch(args.quick, args.device, SurfEval) if args.only != "grids" else []
     subdir = "gpu" if args.device == "cuda" else ""
     suffix = "_quick" if args.quick else ""
     meta = {"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3,
@@ -257,22 +326,32 @@ def main() -> None:
                ("x_nurbsdiff_fwd_bwd", "x NURBS-Diff (fwd+bwd)"), ("nurbsdiff_nan", "NURBS-Diff NaN"),
                ("nurbsdiff_max_err", "NURBS-Diff max err"), ("speedup_vs_geomdl", "x geomdl"),
                ("speedup_vs_naive_loop", "x naive loop")]
-    write_results("core_eval" + suffix, rows, columns, meta=meta,
-                  title="Surface evaluation: forward and backward, degree 3, float32", subdir=subdir,
-                  notes="Median of repeats after warm-up. Forward with fixed knots uses the cached basis. "
-                        "NURBS-Diff v2 runs in the same process on its own grid (1e-8 inside the ends); its "
-                        "error is against our float64 evaluation at its parameters. geomdl and the naive loop "
-                        "run on a subset of points; their totals are per-point cost x points.")
-    write_results("core_batch" + suffix, batch_rows,
-                  [("surfaces", "surfaces"), ("control", "control"), ("grid", "grid"),
-                   ("batched_forward_ms", "batched fwd ms"), ("looped_forward_ms", "looped fwd ms"),
-                   ("x_loop_forward", "x loop (fwd)"), ("batched_fwd_bwd_ms", "batched fwd+bwd ms"),
-                   ("looped_fwd_bwd_ms", "looped fwd+bwd ms"), ("x_loop_fwd_bwd", "x loop (fwd+bwd)"),
-                   ("nurbsdiff_fwd_bwd_ms", "NURBS-Diff fwd+bwd ms"),
-                   ("max_abs_diff_batch_vs_loop", "max |batch - loop|")],
-                  meta=meta, title="A batch of 64 surfaces against a loop, float32", subdir=subdir,
-                  notes="One NURBSSurface with control points (64, 16, 16, 3) sampled on 128^2, against a "
-                        "Python loop over the 64 single surfaces; forward + backward to control points and weights.")
+    if rows:
+        write_results("core_eval" + suffix, rows, columns, meta=meta,
+                      title="Surface evaluation: forward and backward, degree 3, float32", subdir=subdir,
+                      notes="Median of repeats after warm-up. Forward with fixed knots uses the cached basis. "
+                            "NURBS-Diff v2 runs in the same process on its own grid (1e-8 inside the ends); its "
+                            "error is against our float64 evaluation at its parameters. geomdl and the naive loop "
+                            "run on a subset of points; their totals are per-point cost x points.")
+    if batch_rows:
+        write_results("core_batch" + suffix, batch_rows,
+                      [("surfaces", "surfaces"), ("control", "control"), ("grid", "grid"),
+                       ("batched_forward_ms", "batched fwd ms"), ("looped_forward_ms", "looped fwd ms"),
+                       ("x_loop_forward", "x loop (fwd)"), ("batched_fwd_bwd_ms", "batched fwd+bwd ms"),
+                       ("looped_fwd_bwd_ms", "looped fwd+bwd ms"), ("x_loop_fwd_bwd", "x loop (fwd+bwd)"),
+                       ("loop_overhead_us_per_surface_fwd_bwd", "loop overhead us/surface (fwd+bwd)"),
+                       ("loop_ops_per_surface_fwd_bwd", "loop ops/surface (fwd+bwd)"),
+                       ("arithmetic_ms_fwd_bwd", "arithmetic ms (fwd+bwd)"),
+                       ("ceiling_x_loop_fwd_bwd", "ceiling x loop (fwd+bwd)"),
+                       ("ceiling_x_loop_fwd", "ceiling x loop (fwd)"),
+                       ("nurbsdiff_fwd_bwd_ms", "NURBS-Diff fwd+bwd ms"),
+                       ("max_abs_diff_batch_vs_loop", "max |batch - loop|")],
+                      meta=meta, title="A batch of 64 surfaces against a loop, float32", subdir=subdir,
+                      notes="One NURBSSurface with control points (64, 16, 16, 3) sampled on 128^2, against a "
+                            "Python loop over the 64 single surfaces; forward + backward to control points and weights. "
+                            "Loop overhead: the loop's time on a 2 x 2 grid less the batch's, per surface; arithmetic: "
+                            "the batch at 128^2 less the batch at 2 x 2; ceiling = (arithmetic + 64 x overhead) / "
+                            "arithmetic, the most a batch can gain over the loop when both do the same arithmetic.")
 
 
 if __name__ == "__main__":

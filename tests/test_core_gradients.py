@@ -111,6 +111,36 @@ def test_grid_gradients_equal_scattered_gradients():
         assert_close(a, b, atol=1e-10 * max(1.0, float(b.abs().max())))
 
 
+@pytest.mark.parametrize("batch", [(), (2,)], ids=["single", "batch"])
+def test_gradcheck_grid_through_the_one_node_path(batch):
+    # A surface grid is one autograd node with a hand-written backward, also when the
+    # knots and the grid parameters train (dB_u = dH X^T, dB_v^T = Pw^T dX): gradcheck
+    # every input at once, knots of both directions, on a batch sharing its knots.
+    s, rng = _distinct_knots_spline(NURBSSurface, (3, 2), (6, 5), 16)
+    if batch:
+        g = torch.Generator().manual_seed(0)
+        cp0 = s.control_points + 0.1 * torch.rand(batch + s.control_points.shape, generator=g, dtype=torch.float64)
+        s = s._replace(control_points=cp0, weights=s.weights.expand(batch + s.weights.shape).clone())
+    inner_u, with_u = _interior_knot_fn(s, 0)
+    inner_v = s.knot_vectors[1][3:5].clone()
+    head_v, tail_v = s.knot_vectors[1][:3], s.knot_vectors[1][5:]
+    u, v = s.grid_axes((7, 4))
+    inputs = [t.clone().requires_grad_() for t in (s.control_points, s.weights, inner_u, inner_v, u)]
+
+    def f(cp, w, ku, kv, uu):
+        t = with_u(ku)
+        t = t._replace(control_points=cp, weights=w, knot_vectors=[t.knot_vectors[0], torch.cat([head_v, kv, tail_v])])
+        return t.evaluate_grid(uu, v)
+
+    assert gradcheck(f, tuple(inputs))
+    # the same values as the scattered evaluation, and as the cached (fixed-knot) path
+    mesh = torch.stack(torch.meshgrid(u, v, indexing="ij"), -1).reshape(-1, 2)
+    out = f(*inputs).detach()
+    scale = float(out.abs().max())
+    assert_close(out.reshape(batch + (-1, 3)), s.evaluate(mesh), atol=1e-14 * scale)
+    assert_close(out, s.evaluate_grid(u, v), atol=1e-15 * scale)
+
+
 def test_parameter_gradient_is_the_derivative():
     s, rng = _distinct_knots_spline(NURBSSurface, (3, 3), (6, 6), 15)
     uv = random_params(rng, s, 10, ends=False).requires_grad_()
