@@ -15,6 +15,8 @@ Steps (each a library call where one exists):
    continuation (see ``_pair_ends``): an "X" gives two strokes, a "T" its bar and its
    stem, a curve crossing itself one stroke, a hairpin (a curve turning back on itself)
    one stroke, two curves touching near-tangentially two strokes sharing the stretch.
+   Then each junction's pairing is re-chosen for the fewest control points and curves
+   that describe the whole strokes (``_fewest_curves``, minimum description length).
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
