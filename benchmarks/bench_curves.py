@@ -94,9 +94,9 @@ def upsample(image: np.ndarray, factor: int) -> np.ndarray:
 
 # The count accuracy measured before this session's changes (same seeds and sizes, 300
 # images per row; benchmarks/results/curves.md at that commit).
-BEFORE_COMMIT = "50094a0"
-BEFORE = {(128, 1): 95.3, (128, 2): 65.3, (128, 3): 45.3, (128, "1-3"): 68.6,
-          (512, 1): 97.0, (512, 2): 83.7, (512, 3): 64.0, (512, "1-3"): 81.6}
+BEFORE_COMMIT = "775fc58"
+BEFORE = {(128, 1): 96.7, (128, 2): 76.7, (128, 3): 55.0, (128, "1-3"): 76.1,
+          (512, 1): 97.0, (512, 2): 87.3, (512, 3): 66.3, (512, "1-3"): 83.6}
 
 # Failure classes, read off the true curves (not the drawing): how a count can go wrong.
 CLASSES = ("self-crossing", "end on another curve", "sharp turn", "plain")

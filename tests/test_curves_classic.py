@@ -226,3 +226,32 @@ def test_a_thick_blob_still_gives_curves():
     assert len(curves) >= 1
     ch = chamfer_to_ink(curves, ink)
     assert ch["curves_to_ink"] < 1.0 and ch["ink_to_curves"] < width, (ch, width)
+
+
+def test_matchings_count_the_pairings_of_a_junction():
+    from nurbskit.curves.classic import _matchings
+
+    # Closed forms: all matchings of K_n (telephone numbers 1, 2, 4, 10, 26, 76) and the
+    # perfect (or one-short) ones ((n - 1)!! for even n, n (n - 2)!! for odd n).
+    for n, every, largest in ((2, 2, 1), (3, 4, 3), (4, 10, 3), (5, 26, 15), (6, 76, 15)):
+        ends = list(range(n))
+        assert len(_matchings(ends, partial=True)) == every
+        assert len(_matchings(ends, partial=False)) == largest
+        for m in _matchings(ends, partial=True):  # disjoint pairs
+            used = [e for pair in m for e in pair]
+            assert len(used) == len(set(used))
+
+
+def test_control_points_needed_reads_a_cubic_count():
+    from nurbskit.curves.classic import _control_points_needed
+
+    # A gentle cubic (5 control points): its own count or barely more (chord-length
+    # parameters and one correction are not its own parameters, so the count is an upper bound).
+    cp = np.array([[10, 60], [40, 30], [70, 70], [100, 40], [120, 60]], dtype=float)
+    n, bound = _control_points_needed(_curve(cp)[::8], 1.0)
+    assert 5 <= n <= 7 and bound <= 1.0
+    line = np.stack([np.linspace(0, 100, 50), np.linspace(0, 30, 50)], axis=1)
+    assert _control_points_needed(line, 0.25)[0] == 4
+    # A corner needs many more than either of its sides: uniform knots pay for it everywhere.
+    corner = np.concatenate([line, line[-1] + np.stack([np.zeros(50), np.linspace(0, 100, 50)], axis=1)[1:]])
+    assert _control_points_needed(corner, 1.0)[0] > 12

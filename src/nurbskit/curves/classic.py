@@ -15,6 +15,8 @@ Steps (each a library call where one exists):
    continuation (see ``_pair_ends``): an "X" gives two strokes, a "T" its bar and its
    stem, a curve crossing itself one stroke, a hairpin (a curve turning back on itself)
    one stroke, two curves touching near-tangentially two strokes sharing the stretch.
+   Then each junction's pairing is re-chosen for the fewest control points and curves
+   that describe the whole strokes (``_fewest_curves``, minimum description length).
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -285,7 +287,7 @@ def _least_turning(ends: list, cos) -> list:
     return best(list(ends))[1]
 
 
-def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set]:
+def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set, set]:
     """Which edge continues which through each node of the stroke graph (good continuation).
 
     ``edges`` is a list of ``(a, b, pixels)`` (node ids, ``-1`` for none; ``pixels`` from
@@ -293,7 +295,8 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set]:
     ``a`` and 1 at ``b``. Returns ``partner`` (end -> end: a stroke leaving through the
     first end comes back in through the second) and ``tips``, the ends joined at a
     hairpin's tip (no trimming there). Edges that two curves share are appended to
-    ``edges`` as a second copy.
+    ``edges`` as a second copy. Also returns ``done``, the nodes whose pairing the
+    shared-edge rule settled (no other pairing is tried there).
 
     The rules, in order, at each node (the Gestalt rule of good continuation, as in
     vectorisation of line drawings, e.g. Noris et al., "Topology-driven vectorization of
@@ -405,7 +408,7 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0) -> tuple[dict, set]:
         live = [e for e in ends if not stubby(e)]
         for e, f in _least_turning(live if len(live) >= 2 else ends, cos):
             link(e, f)
-    return partner, tips
+    return partner, tips, done
 
 
 def _arc_length(points: np.ndarray) -> float:
@@ -418,11 +421,14 @@ def _min_length(width: float) -> float:
     return 2.0 * min(width, _THICK) + 4.0
 
 
-def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True) -> tuple[list[np.ndarray], float]:
+def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True,
+                  tolerance: float | None = 1.0) -> tuple[list[np.ndarray], float]:
     """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width.
 
     ``simplify=False`` keeps every junction and spur of the skeleton (no merging, no
     pruning): the fallback for blobs whose strokes are as wide as the drawing is long.
+    ``tolerance`` (pixels, the fit's) drives the choice of pairings at junctions
+    (:func:`_fewest_curves`); None keeps the good-continuation pairing alone.
     """
     from scipy import ndimage
     from skimage.morphology import skeletonize
@@ -496,20 +502,216 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
             pruned.append((ra, rb, path))
     edges = pruned
 
-    partner, tips = _pair_ends(edges, int(max(4, _REACH * width)), _min_length(width))
-
-    # Chain edges into strokes.
-    used, strokes = set(), []
-
+    partner, tips, done = _pair_ends(edges, int(max(4, _REACH * width)), _min_length(width))
     # Near a junction the skeleton bends towards it (the medial axis of a crossing is not
     # the two centre lines): through a junction, the last pixels of each branch are left
     # out and the spline bridges the gap. Not at a hairpin's tip, which is the stroke's own end.
     trim = int(np.ceil(width))
+    origin = (c0 + 0.5, r0 + 0.5)
+    extent = float(np.hypot(*ink.shape))
+    if simplify and tolerance is not None and extent <= _SEARCH_EXTENT:
+        partner = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent)
+    out = [pts for pts, _ in _chains(edges, partner, tips, trim, origin)]
+    out = _join_broken(out, width)
+    return out, width
+
+
+# The description length of a curve beyond its control points (see _fewest_curves): one
+# more curve costs as much as this many control points.
+_CURVE_COST = 4.0
+# The search runs on drawings whose ink spans at most this many pixels (bounding-box
+# diagonal): on the 512 px development drawings it changed no count for 3 times the
+# time (benchmarks/results/curves.md).
+_SEARCH_EXTENT = 256.0
+# Junctions with more branch ends than this keep their good-continuation pairing.
+_SEARCH_ENDS = 6
+# Points per stroke at most when scoring it.
+_SCORE_POINTS = 96
+# Strokes are scored at this many times the fit tolerance, or at this fraction of the
+# drawing's extent (the diagonal of the ink's bounding box) where that is more.
+_SCORE_TOL = 2.0
+_SCORE_REL = 0.015
+# Whether nodes of two ends (a stroke passing through a corner) may be split.
+_SEARCH_TWO = 0.0
+
+
+def _matchings(ends: list, partial: bool) -> list:
+    """Every set of disjoint pairs of ``ends`` (all of them when ``partial``, else only the
+    largest) -> list of lists of pairs."""
+    if len(ends) < 2:
+        return [[]]
+    e, rest = ends[0], ends[1:]
+    out = [[(e, f)] + m for x, f in enumerate(rest) for m in _matchings(rest[:x] + rest[x + 1:], partial)]
+    if partial or len(ends) % 2:
+        out += [m for m in _matchings(rest, partial)]
+    if not partial:
+        size = max(len(m) for m in out)
+        out = [m for m in out if len(m) == size]
+    return out
+
+
+def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3) -> tuple[int, float]:
+    """The fewest control points of a clamped uniform B-spline within ``tolerance`` of
+    ``points (N, 2)`` -> ``(count, largest residual)``.
+
+    The search of :func:`fit_stroke` (least squares on chord-length parameters, one
+    parameter correction, galloping then bisection on the count), on scipy's sparse
+    design matrix (``scipy.interpolate.BSpline.design_matrix``) instead of the core's
+    differentiable basis: a cost read many times while choosing junction pairings
+    (:func:`_fewest_curves`), where no curve is kept and no gradient is needed.
+    """
+    from scipy.interpolate import BSpline
+
+    n_pts = len(points)
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    u0 = np.concatenate([[0.0], np.cumsum(seg)]) / max(seg.sum(), 1e-12)
+    cap = max(degree + 1, min(n_pts // 3, int(seg.sum() / 3) + degree))
+
+    def residual(n_ctrl):
+        t = np.concatenate([np.zeros(degree), np.linspace(0, 1, n_ctrl - degree + 1), np.ones(degree)])
+        D = np.diff(np.eye(n_ctrl), n=2, axis=0) * _SMOOTH
+        u = u0
+        for rounds in range(2):
+            B = BSpline.design_matrix(np.clip(u, 0, 1), t, degree).toarray()
+            cp = np.linalg.solve(B.T @ B + D.T @ D, B.T @ points)
+            r = points - B @ cp
+            if rounds:
+                break
+            # Hoschek's correction: each parameter moved towards its foot point.
+            dB = BSpline(t, cp, degree).derivative()(u)
+            du = (r * dB).sum(1) / np.maximum((dB * dB).sum(1), 1e-12)
+            u = np.maximum.accumulate(np.clip(u + du, 0, 1))
+            u[0], u[-1] = 0.0, 1.0
+        return float(np.sqrt((r * r).sum(1)).max())
+
+    bounds = {}
+
+    def probe(n):
+        if n not in bounds:
+            bounds[n] = residual(n)
+        return bounds[n]
+
+    lo = hi = degree + 1
+    while hi < cap and probe(hi) > tolerance:
+        lo, hi = hi + 1, min(2 * hi, cap)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if probe(mid) <= tolerance:
+            hi = mid
+        else:
+            lo = mid + 1
+    return hi, probe(hi)
+
+
+def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, origin: tuple,
+                   width: float, tolerance: float, extent: float) -> dict:
+    """The pairing at each junction re-chosen for the shortest description of the drawing.
+
+    Good continuation reads each junction alone and from a few pixels of each branch; a
+    curve ending on another, a curve crossing itself near a sharp turn, or two crossings
+    close together fool it. Here each junction's pairing (which branch continues which,
+    and which end there) is chosen by what the whole strokes cost to describe: the
+    control points of a cubic B-spline that fits each stroke within ``tolerance``
+    (``fit_stroke``, uniform knots, so a corner costs many) plus ``_CURVE_COST`` per
+    stroke; strokes shorter than the shortest kept cost that share of a curve. This is
+    the minimum description length principle (Rissanen 1978) applied to the stroke
+    graph: a curve wrongly split costs an extra curve and more control points, two
+    curves wrongly joined cost the control points of a corner. Coordinate descent: each
+    junction (up to ``_SEARCH_ENDS`` ends, pairings the shared-edge rule settled left
+    alone) tries every pairing of its ends with the others fixed, keeps the cheapest,
+    until a pass changes nothing (at most 3 passes). Fits are cached by stroke.
+
+    Returns the new ``partner`` (a copy).
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    at: dict[int, list] = {}
+    for i, (a, b, _) in enumerate(edges):
+        for side, k in ((0, a), (1, b)):
+            if k >= 0:
+                at.setdefault(k, []).append((i, side))
+    fixed = {e for e in tips} | {e for k in done for e in at.get(k, [])}
+    least = 2 if _SEARCH_TWO else 3
+    # The precision a stroke's shape is read at grows with the drawing: the same drawing
+    # at 4 times the size costs the same (a scale-free description).
+    tolerance = max(tolerance * _SCORE_TOL, _SCORE_REL * extent)
+    nodes = [k for k, ends in at.items() if k not in done and least <= len(ends) <= _SEARCH_ENDS
+             and not any(e in fixed for e in ends)]
+    if not nodes:
+        return partner
+    shortest = _min_length(width)
+    cache: dict = {}
+
+    def stroke_cost(pts, keys):
+        rev = tuple((i, 1 - s) for i, s in reversed(keys))
+        key = min(keys, rev)
+        if key in cache:
+            return cache[key]
+        length = _arc_length(pts)
+        if length < shortest:
+            cost = _CURVE_COST * length / shortest
+        else:
+            closed = len(pts) > 3 and bool(np.all(pts[0] == pts[-1]))
+            if len(pts) > 4:
+                pts = gaussian_filter1d(pts, _STROKE_SIGMA, axis=0, mode="wrap" if closed else "nearest")
+                if closed:
+                    pts[-1] = pts[0]
+                # Resampled by arc length, 2 px apart or _SCORE_POINTS in all: the cost
+                # reads the shape, not the pixel count, and a long stroke stays cheap.
+                arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+                m = int(min(_SCORE_POINTS, max(8, arc[-1] / 2.0)))
+                t = np.linspace(0.0, arc[-1], m)
+                pts = np.stack([np.interp(t, arc, pts[:, k]) for k in range(2)], axis=1)
+            if len(pts) < 4:
+                t = np.linspace(0, 1, 4)
+                pts = np.stack([np.interp(t, np.linspace(0, 1, len(pts)), pts[:, k]) for k in range(2)], axis=1)
+            n_ctrl, bound = _control_points_needed(pts, tolerance)
+            cost = n_ctrl + _CURVE_COST + max(0.0, bound - tolerance) / tolerance * 4.0
+        cache[key] = cost
+        return cost
+
+    def total(p):
+        return sum(stroke_cost(pts, keys) for pts, keys in _chains(edges, p, tips, trim, origin))
+
+    partner = dict(partner)
+    best = total(partner)
+    for _ in range(3):
+        changed = False
+        for k in nodes:
+            ends = at[k]
+            current = {e: partner[e] for e in ends if e in partner}
+            base = {e: f for e, f in partner.items() if e not in current}
+            for pairs in _matchings(ends, partial=len(ends) <= 4):
+                trial = dict(base)
+                for e, f in pairs:
+                    trial[e], trial[f] = f, e
+                if all(trial.get(e) == current.get(e) for e in ends):
+                    continue
+                cost = total(trial)
+                if cost < best - 1e-9:
+                    best, partner, changed = cost, trial, True
+                    current = {e: partner[e] for e in ends if e in partner}
+            # (the base of later trials at this node: the best so far)
+        if not changed:
+            break
+    return partner
+
+
+def _chains(edges: list, partner: dict, tips: set, trim: int, origin: tuple) -> list:
+    """Edges chained into strokes through the ``partner`` links -> ``[(points (n, 2), ends)]``.
+
+    ``points`` are pixel centres (x, y) (``origin`` added to (col, row)), consecutive
+    duplicates dropped; ``ends`` is the tuple of ``(edge, side)`` walked, which names the
+    stroke. Through a junction (a link not in ``tips``) ``trim`` pixels of each side are
+    left out.
+    """
+    used, out = set(), []
 
     def walk(i, side):
-        chain, cut = [], False
+        chain, keys, cut = [], [], False
         while i not in used:
             used.add(i)
+            keys.append((i, side))
             path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
             if chain and cut:  # arriving through a junction
                 path = path[min(trim, max(0, len(path) - 2)) + 1:]
@@ -523,26 +725,20 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
             if nxt is None:
                 break
             i, side = nxt
-        return chain
+        return chain, tuple(keys)
 
-    starts = [(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner]
-    for i, side in starts:
-        if i not in used:
-            strokes.append(walk(i, side))
-    for i in range(len(edges)):
-        if i not in used:
-            strokes.append(walk(i, 0))
-    out = []
-    for chain in strokes:
-        # Drop consecutive duplicates; (row, col) -> pixel centre (x, y).
-        pts = np.array(chain, dtype=float)[:, ::-1] + (c0 + 0.5, r0 + 0.5)
+    walks = [walk(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner and i not in used]
+    walks += [walk(i, 0) for i in range(len(edges)) if i not in used]  # closed chains
+    for chain, keys in walks:
+        if not chain:
+            continue
+        pts = np.array(chain, dtype=float)[:, ::-1] + origin
         keep = np.ones(len(pts), bool)
         keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
         pts = pts[keep]
         if len(pts) >= 2:
-            out.append(pts)
-    out = _join_broken(out, width)
-    return out, width
+            out.append((pts, keys))
+    return out
 
 
 # Two stroke ends this close (stroke widths, plus 2 px) that continue each other are joined.
@@ -813,14 +1009,14 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
-    strokes, width = trace_strokes(ink)
+    strokes, width = trace_strokes(ink, tolerance=tolerance)
     if min_length is None:
         min_length = _min_length(width)
     if not any(_arc_length(st) >= min_length for st in strokes):
         # Strokes as wide as the drawing is long (a digit upsampled from 8 x 8): merging
         # junctions and pruning spurs left nothing long enough. The raw skeleton's longest
         # strokes are better than no curve.
-        strokes, width = trace_strokes(ink, width, simplify=False)
+        strokes, width = trace_strokes(ink, width, simplify=False, tolerance=None)
         longest = max((_arc_length(st) for st in strokes), default=0.0)
         if longest >= 2.0 * width + 4.0:  # still a stroke, not a dot
             min_length = min(min_length, 0.5 * longest)
