@@ -531,8 +531,6 @@ _SCORE_POINTS = 96
 # drawing's extent (the diagonal of the ink's bounding box) where that is more.
 _SCORE_TOL = 2.0
 _SCORE_REL = 0.015
-# Whether nodes of two ends (a stroke passing through a corner) may be split.
-_SEARCH_TWO = 0.0
 
 
 def _matchings(ends: list, partial: bool) -> list:
@@ -548,6 +546,34 @@ def _matchings(ends: list, partial: bool) -> list:
         size = max(len(m) for m in out)
         out = [m for m in out if len(m) == size]
     return out
+
+
+def _fewest_within(residual, least: int, cap: int, tolerance: float) -> tuple[int, dict]:
+    """The smallest control-point count in ``[least, cap]`` whose ``residual(n)`` is within
+    ``tolerance`` (``cap`` when none is) -> ``(count, {count probed: residual})``.
+
+    Galloping, then bisection: most strokes need few control points, so the probes stay
+    small (``least``, then doubling) until one fits; the residual is taken to fall as the
+    count grows. Shared by :func:`fit_stroke` and :func:`_control_points_needed`.
+    """
+    bounds: dict[int, float] = {}
+
+    def probe(n):
+        if n not in bounds:
+            bounds[n] = residual(n)
+        return bounds[n]
+
+    lo = hi = least
+    while hi < cap and probe(hi) > tolerance:
+        lo, hi = hi + 1, min(2 * hi, cap)
+    while lo < hi:  # hi always fits or is the cap
+        mid = (lo + hi) // 2
+        if probe(mid) <= tolerance:
+            hi = mid
+        else:
+            lo = mid + 1
+    probe(hi)
+    return hi, bounds
 
 
 def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3) -> tuple[int, float]:
@@ -584,23 +610,8 @@ def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3
             u[0], u[-1] = 0.0, 1.0
         return float(np.sqrt((r * r).sum(1)).max())
 
-    bounds = {}
-
-    def probe(n):
-        if n not in bounds:
-            bounds[n] = residual(n)
-        return bounds[n]
-
-    lo = hi = degree + 1
-    while hi < cap and probe(hi) > tolerance:
-        lo, hi = hi + 1, min(2 * hi, cap)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if probe(mid) <= tolerance:
-            hi = mid
-        else:
-            lo = mid + 1
-    return hi, probe(hi)
+    hi, bounds = _fewest_within(residual, degree + 1, cap, tolerance)
+    return hi, bounds[hi]
 
 
 def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, origin: tuple,
@@ -631,7 +642,7 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
             if k >= 0:
                 at.setdefault(k, []).append((i, side))
     fixed = {e for e in tips} | {e for k in done for e in at.get(k, [])}
-    least = 2 if _SEARCH_TWO else 3
+    least = 3  # a node of two ends is a stroke passing through: never split there
     # The precision a stroke's shape is read at grows with the drawing: the same drawing
     # at 4 times the size costs the same (a scale-free description).
     tolerance = max(tolerance * _SCORE_TOL, _SCORE_REL * extent)
@@ -907,24 +918,8 @@ def fit_stroke(points: np.ndarray, tolerance: float = 1.0, degree: int = 3, max_
             best = (cp, u, bound)
         return best
 
-    # Galloping, then bisection: most strokes need few control points, so the probes
-    # stay small (degree + 1, then doubling) until one fits.
-    bounds = {}
-
-    def probe(n_ctrl):
-        bounds[n_ctrl] = fit(n_ctrl, 1)[2]
-        return bounds[n_ctrl]
-
-    lo, hi = degree + 1, degree + 1
-    while hi < max_ctrl and probe(hi) > tolerance:
-        lo, hi = hi + 1, min(2 * hi, max_ctrl)
-    while lo < hi:  # the smallest n with a bound within tolerance (hi always fits or is the cap)
-        mid = (lo + hi) // 2
-        if probe(mid) <= tolerance:
-            hi = mid
-        else:
-            lo = mid + 1
-    if bounds.get(hi, probe(hi)) > tolerance:  # nothing fits (a stroke too wiggly): the closest probe
+    hi, bounds = _fewest_within(lambda n_ctrl: fit(n_ctrl, 1)[2], degree + 1, max_ctrl, tolerance)
+    if bounds[hi] > tolerance:  # nothing fits (a stroke too wiggly): the closest probe
         hi = min(bounds, key=bounds.get)
     cp, u, bound = fit(hi, corrections)
     curve = NURBSCurve(cp, degree=degree)
