@@ -6,11 +6,13 @@ Convention:
     trimming loop (a closed polyline in (u, v)) becomes a wire of edges of
     ``EDGE_SEGMENTS`` polyline segments (why: at ``EDGE_SEGMENTS``); an edge's curve on
     the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
-    parameter = cumulative chord length in (u, v) along the loop), and its 3-D curve is
-    its piece of the exact image of the polyline: along a straight (u, v) segment the
-    surface point is a polynomial of degree ``p + q`` (homogeneous coordinates) within a
-    knot span, so the 3-D curve is a rational B-spline of that degree, computed by
-    :func:`loop_curve_3d` (no approximation, unlike OCC's ``BRepLib::BuildCurves3d``).
+    parameter = cumulative chord length in (u, v) along the loop: the exact trim), and
+    its 3-D curve is its piece of a polynomial approximation of the polyline's image
+    within the edge's tolerance (``CURVE_TOLERANCE`` of the surface's size, which the
+    edge carries; :func:`approximate_loop_curves_3d`). The exact image is rational of
+    degree ``p + q`` (:func:`loop_curve_3d`: along a straight (u, v) segment the surface
+    point is a polynomial of degree ``p + q`` in homogeneous coordinates within a knot
+    span), written where it is smaller or with ``EXACT_CURVES``.
     A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
     face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
@@ -269,17 +271,23 @@ def approximate_loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray
     piece = np.arange(len(coeff))  # the exact piece a sub-piece lies on
     lo, hi = np.zeros(len(coeff)), np.ones(len(coeff))  # the sub-piece, in the piece's [0, 1]
     done = []  # accepted sub-pieces: (loop, s_start, s_end, poles (P, k + 1, 3))
+    first = True
     for _ in range(APPROX_MAX_HALVINGS + 1):
-        t = lo[:, None] + local[None, :] * (hi - lo)[:, None]  # (m, n)
-        h = _bernstein_matrix(d, t) @ coeff[piece]  # (m, n, 4)
+        if first:  # whole pieces: one Bernstein matrix for all
+            h = _bernstein_matrix(d, local) @ coeff  # (m, n, 4)
+            first = False
+        else:
+            t = lo[:, None] + local[None, :] * (hi - lo)[:, None]  # (m, n)
+            h = _bernstein_matrix(d, t) @ coeff[piece]  # (m, n, 4)
         xyz = h[..., :3] / h[..., 3:]
         poles = inverse @ xyz[:, :k + 1]  # (m, k + 1, 3)
         poles[:, 0], poles[:, -1] = xyz[:, 0], xyz[:, k]  # the ends interpolate exactly
         error = np.linalg.norm(check_basis @ poles - xyz[:, k + 1:], axis=-1).max(axis=1)
         good = error <= APPROX_MARGIN * tolerance
-        s_lo, s_hi = sa[piece] + lo * (sb - sa)[piece], sa[piece] + hi * (sb - sa)[piece]
-        s_lo[lo == 0], s_hi[hi == 1] = sa[piece][lo == 0], sb[piece][hi == 1]  # piece ends: exactly
-        done.append((which[piece][good], s_lo[good], s_hi[good], poles[good]))
+        a, b = sa[piece[good]], sb[piece[good]]
+        s_lo = np.where(lo[good] == 0, a, a + lo[good] * (b - a))  # piece ends: exactly
+        s_hi = np.where(hi[good] == 1, b, a + hi[good] * (b - a))
+        done.append((which[piece[good]], s_lo, s_hi, poles[good]))
         bad = ~good
         if not bad.any():
             break
