@@ -134,9 +134,9 @@ def _homogeneous_points(surface, net: np.ndarray, uv: np.ndarray, span_uv: np.nd
         values.append(basis.numpy())
         index.append(spans.numpy()[:, None] - degree + np.arange(degree + 1))
     block = net[index[0][:, :, None], index[1][:, None, :]]  # (M, p + 1, q + 1, 4)
-    # sum_i N_i(u) sum_j N_j(v) P_ij as two batched products
-    along_v = (values[1][:, None, None, :] @ block).squeeze(2)  # (M, p + 1, 4)
-    return (values[0][:, None, :] @ along_v).squeeze(1)
+    # sum_ij N_i(u) N_j(v) P_ij: the (p + 1)(q + 1) products, then one contraction
+    weights = (values[0][:, :, None] * values[1][:, None, :]).reshape(len(uv), -1)
+    return np.einsum("mk,mkc->mc", weights, block.reshape(len(uv), -1, block.shape[-1]))
 
 
 def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
