@@ -8,7 +8,8 @@ wavy height fields, 10 mm apart, seed 0), each trimmed by an outer loop of 64 po
 hole of 32 points (a trimmed patch as ``nurbskit patches`` writes it). Per format, each
 stage once to warm up, then the median of ``--repeats`` runs:
 
-- ``shape``: nurbskit objects to one OCC compound (faces with exact trimming curves);
+- ``shape``: nurbskit objects to one OCC compound (faces whose trimming edges carry the
+  exact pcurve and a 3-D curve within the edge's tolerance, ``shapes.approximate_loop_curves_3d``);
 - ``write``: OCC's translator and the 17-digit text writer (BREP: ``BRepTools::Write``);
 - ``check``: the built-in check (file read back with OCC without its shape healing, as
   ``write_shape`` does, then ``BRepCheck_Analyzer`` in its parallel mode);
@@ -21,6 +22,12 @@ what the stage costs on an idle core, and far less sensitive to other processes 
 wall seconds). The fraction of ``written`` each stage takes is from CPU seconds.
 Ablation (STEP, one run each): the trimming loops as one edge per loop, one edge per
 polyline segment, and edges of ``shapes.EDGE_SEGMENTS`` segments (the default).
+Before / after in the same run: every format's shape + write + check again with the exact
+rational 3-D trimming curves of degree p + q (``shapes.EXACT_CURVES = True``, what earlier
+versions wrote), so the ratio ``written / written with exact curves`` is measured under
+the same load. The approximated 3-D curves' largest deviation from the exact image of the
+pcurve (``S(pcurve(t))``) is measured at 2,001 parameters per loop (OCC evaluating the
+curve, nurbskit the surface) and reported over the edge's tolerance (must be <= 1).
 
 Peers in the same process: OCC's own STEP/IGES writer (``STEPControl_Writer::Write``,
 12 decimals) on the same shape (ratio ``write / peer``), and the same faces with OCC's
@@ -30,7 +37,7 @@ poles of the 3-D trimming curves, validity, largest round-trip error at 11 x 11 
 per patch (relative to the patch's diagonal). One torch thread (the evaluations are
 small). Other processes may share the two cores: seconds can be contended.
 
-Run: ``python benchmarks/bench_cad.py [--repeats 3] [--patches 100]``; writes
+Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/bench_cad.py [--repeats 3] [--patches 100]``; writes
 ``benchmarks/results/cad.json`` and ``.md``.
 """
 
@@ -59,8 +66,9 @@ import nurbskit  # noqa: E402
 from nurbskit.core.trim import TrimLoop, TrimmedSurface  # noqa: E402
 
 
-#: written CPU seconds before the check lost OCC's healing (results/cad.md of the previous run)
-BEFORE = "STEP 3.31 s (shape 0.87, write 0.76, check 1.68), IGES 4.73 s (check 3.24), BREP 1.61 s"
+#: the previous session's quiet-machine numbers (exact rational 3-D trimming curves, '%.17f' reals)
+BEFORE = ("written, wall (CPU): STEP 3.04 s (3.31: shape 1.03, write 0.77, check 1.51), IGES 2.65 s (2.88), "
+          "BREP 1.77 s (2.04); STEP 15.7 MB, IGES 23.5 MB, BREP 9.1 MB")
 
 
 def make_patches(count: int, size: int = 12, seed: int = 0) -> list[TrimmedSurface]:
@@ -176,6 +184,33 @@ def max_error(patches, model) -> float:
     return worst
 
 
+def curve_deviation(patches) -> tuple[float, float, float]:
+    """(largest deviation of the written 3-D trimming curves from S(pcurve(t)) over the
+    edge's tolerance, approximated poles per loop, exact poles per loop)."""
+    from nurbskit.io.cad import shapes
+
+    worst, approx_poles, exact_poles, loops = 0.0, 0, 0, 0
+    for p in patches:
+        s = p.surface
+        closed = [np.vstack([lp.uv, lp.uv[:1]]) for lp in p.loops]
+        params = [shapes._chord_parameters(c) for c in closed]
+        tol = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(shapes._surface_size(s), 1.0))
+        curves = shapes.approximate_loop_curves_3d(s, list(zip(closed, params)), tol)
+        exact = shapes.loop_curves_3d(s, list(zip(closed, params)))
+        for uv, t, c, e in zip(closed, params, curves, exact):
+            geom = shapes._bspline_curve_3d(*c)
+            tt = np.unique(np.concatenate([np.linspace(t[0], t[-1], 2001), t]))
+            seg = np.clip(np.searchsorted(t, tt, side="right") - 1, 0, len(t) - 2)
+            at = uv[seg] + ((tt - t[seg]) / (t[seg + 1] - t[seg]))[:, None] * (uv[seg + 1] - uv[seg])
+            pts = np.array([[q.X(), q.Y(), q.Z()] for q in (geom.Value(float(x)) for x in tt)])
+            dev = float(np.linalg.norm(pts - s.evaluate(torch.tensor(at)).numpy(), axis=1).max())
+            worst = max(worst, dev / tol)
+            approx_poles += len(c[0])
+            exact_poles += len(e[0])
+            loops += 1
+    return worst, approx_poles / loops, exact_poles / loops
+
+
 def ablation(patches, tmp: Path, segments: list[int]) -> list[dict]:
     """STEP written with the trimming loops cut into edges of ``k`` segments (0: one edge per loop)."""
     from nurbskit.io.cad import shapes
@@ -195,6 +230,18 @@ def ablation(patches, tmp: Path, segments: list[int]) -> list[dict]:
     finally:
         shapes.EDGE_SEGMENTS = default
     return rows
+
+
+def written_exact(patches, path: Path) -> dict:
+    """shape + write + check with the exact rational 3-D trimming curves (the previous writer)."""
+    from nurbskit.io.cad import shapes
+    from nurbskit.io.cad.exchange import write_shape
+
+    shapes.EXACT_CURVES = True
+    try:
+        return write_shape(shapes.to_shape(patches, sew_tolerance=None), path)
+    finally:
+        shapes.EXACT_CURVES = False
 
 
 def main(argv=None) -> int:
@@ -231,6 +278,9 @@ def main(argv=None) -> int:
             peer = Path(tmp) / f"peer.{fmt}"
             t_peer, _, _ = median_time(lambda: occ_default_write(shape, peer, fmt), args.repeats)
             c_written = c_shape + c_write + c_check
+            # before / after in the same run: the exact rational 3-D curves (EXACT_CURVES)
+            t_exact, c_exact, exact_report = median_time(lambda: written_exact(patches, Path(tmp) / f"exact.{fmt}"),
+                                                         args.repeats)
             rows.append({
                 "format": fmt, "patches": len(patches), "shape_s": t_shape, "write_s": t_write, "check_s": t_check,
                 "written_s": t_shape + t_write + t_check, "read_s": t_read,
@@ -244,6 +294,10 @@ def main(argv=None) -> int:
                 "shape_fraction": c_shape / c_written, "write_fraction": c_write / c_written,
                 "check_fraction": c_check / c_written,
                 "occ_default_write_s": t_peer, "write_vs_occ_default": t_write / t_peer,
+                "written_exact_curves_s": t_exact, "written_exact_curves_cpu_s": c_exact,
+                "written_vs_exact_curves_cpu": c_written / c_exact,
+                "exact_curves_file_mb": (Path(tmp) / f"exact.{fmt}").stat().st_size / 1e6,
+                "exact_curves_valid": exact_report["valid"],
                 "valid": report["valid"], "faces_read": len(model.faces), "edges": report["edges"],
                 "holes_read": sum(len(f.holes) for f in model.faces),
                 "file_mb": path.stat().st_size / 1e6, "occ_default_file_mb": peer.stat().st_size / 1e6,
@@ -253,10 +307,14 @@ def main(argv=None) -> int:
                   f"write {c_write:.2f}, check {c_check:.2f}), read {c_read:.2f} s CPU, valid {report['valid']}",
                   file=sys.stderr)
         ablation_rows = ablation(patches, Path(tmp), sorted({0, 4, 8, shapes.EDGE_SEGMENTS}))
+    deviation, approx_per_loop, exact_per_loop = curve_deviation(patches)
     meta = {
+        "curve_deviation_over_tolerance": deviation, "curve_tolerance_rel": shapes.CURVE_TOLERANCE,
+        "approx_degree": shapes.APPROX_DEGREE, "approx_poles_per_loop": approx_per_loop,
+        "exact_rational_poles_per_loop": exact_per_loop,
         "patches": len(patches), "control_points": "12 x 12, bicubic, rational", "loop_points": [64, 32],
         "edge_segments": shapes.EDGE_SEGMENTS,
-        "exact_curve_poles_per_loop": float(np.sum(exact_poles)) / (2 * len(patches)),
+        "written_curve_poles_per_loop": float(np.sum(exact_poles)) / (2 * len(patches)),
         "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
         "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
         "repeats": args.repeats, "torch_threads": 1, "ablation": ablation_rows,
@@ -275,9 +333,14 @@ def main(argv=None) -> int:
              f"{step['check_s'] - step['check_read_back_s']:.2f} s wall on its threads). "
              "The check reads the file back without OCC's shape healing (exchange.CHECK_READ_FIXES); "
              "`previous check`: OCC's default reading (healing) and a serial analyzer, timed in the same run. "
-             f"Before this (the same benchmark, healing on, serial analyzer): written CPU {BEFORE}. "
+             f"The previous session's writer on the quiet machine: {BEFORE}. "
              f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
-             f"Exact 3-D trimming curves: {meta['exact_curve_poles_per_loop']:.0f} poles per loop (over its edges); "
+             f"3-D trimming curves: polynomial of degree {shapes.APPROX_DEGREE} within the edge tolerance "
+             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm): "
+             f"{approx_per_loop:.0f} poles per loop against {exact_per_loop:.0f} for the exact rational curves of "
+             f"degree 6; largest deviation from S(pcurve(t)) at 2,001 parameters per loop: {deviation:.2f} of the "
+             f"tolerance. Written: {meta['written_curve_poles_per_loop']:.0f} poles per loop (over its edges). "
+             f"`exact curves` columns: shape + write + check with the exact curves (the previous writer), same run. "
              f"OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
              f"poles per loop, {t_approx:.2f} s wall against {t_shape:.2f} s for the exact ones. `max_error_rel`: "
              "largest |S_back - S| on an 11 x 11 grid per patch over the patch's diagonal. Peer: OCC's own writer on "
@@ -288,7 +351,10 @@ def main(argv=None) -> int:
     columns = [("format", "format"), ("written_s", "written (s)"), ("written_cpu_s", "written CPU (s)"),
                ("shape_cpu_s", "shape CPU"), ("write_cpu_s", "write CPU"), ("check_cpu_s", "check CPU"),
                ("healed_check_cpu_s", "previous check CPU (healing, serial)"),
-               ("written_cpu_s_with_healed_check", "written CPU with previous check"),
+               ("written_exact_curves_s", "written, exact curves (s)"),
+               ("written_exact_curves_cpu_s", "written CPU, exact curves"),
+               ("written_vs_exact_curves_cpu", "written CPU / exact curves"),
+               ("exact_curves_file_mb", "MB, exact curves"),
                ("read_s", "read (s)"), ("read_cpu_s", "read CPU"), ("write_s", "write (s)"),
                ("occ_default_write_s", "OCC default write (s)"), ("write_vs_occ_default", "write / OCC default"),
                ("valid", "valid"), ("faces_read", "faces"), ("holes_read", "holes"), ("edges", "edges"),

@@ -221,6 +221,88 @@ def test_trimming_curves_are_exact_on_the_surface():
     assert_close(curve.evaluate(torch.tensor(t)), s.evaluate(torch.tensor(at)), atol=1e-11 * diagonal(s))
 
 
+def _dense_deviation(surface, closed: np.ndarray, params: np.ndarray, curve_3d, count: int = 4001) -> float:
+    """Largest |C(t) - S(uv(t))| at ``count`` parameters (the polyline's points included),
+    C evaluated by OpenCASCADE, S by nurbskit."""
+    poles, weights, flat, degree = curve_3d
+    geom = shapes._bspline_curve_3d(poles, weights, flat, degree)
+    t = np.unique(np.concatenate([np.linspace(params[0], params[-1], count), params]))
+    seg = np.clip(np.searchsorted(params, t, side="right") - 1, 0, len(params) - 2)
+    frac = (t - params[seg]) / (params[seg + 1] - params[seg])
+    at = closed[seg] + frac[:, None] * (closed[seg + 1] - closed[seg])
+    return float(np.abs(_occ_points(geom, t) - surface.evaluate(torch.tensor(at)).numpy()).max())
+
+
+@pytest.mark.parametrize("degrees,rational,scale", [((3, 3), True, 1.0), ((3, 3), True, 30.0), ((2, 3), True, 30.0),
+                                                    ((1, 1), True, 10.0), ((3, 3), False, 30.0),
+                                                    ((1, 2), False, 10.0), ((5, 4), True, 30.0)])
+def test_approximated_trimming_curves_stay_within_their_tolerance(degrees, rational, scale):
+    """The 3-D curves written for trimming loops (polynomial, degree APPROX_DEGREE) lie
+    within the edge's tolerance of the exact image of the pcurve, measured densely (4001
+    parameters, far more than the 4 + 5 points per piece the approximation looked at)."""
+    rng = np.random.default_rng(sum(degrees) + 10 * rational)
+    s = random_surface(rng, degrees, rational=rational, scale=scale)
+    (u0, u1), (v0, v1) = s.domain
+    th = np.linspace(0, 2 * np.pi, 37, endpoint=False)
+    r = 0.4 + 0.05 * np.sin(3 * th)
+    uv = np.stack([(u0 + u1) / 2 + r * (u1 - u0) * np.cos(th), (v0 + v1) / 2 + r * (v1 - v0) * np.sin(th)], 1)
+    closed = np.vstack([uv, uv[:1]])
+    params = shapes._chord_parameters(closed)
+    tolerance = shapes.CURVE_TOLERANCE * diagonal(s)
+    curve = shapes.approximate_loop_curves_3d(s, [(closed, params)], tolerance)[0]
+    exact = shapes.loop_curve_3d(s, closed, params)
+    if curve[3] == shapes.APPROX_DEGREE and (rational or sum(degrees) > shapes.APPROX_DEGREE):
+        assert curve[1] is None  # polynomial
+        assert _dense_deviation(s, closed, params, curve) <= tolerance
+        assert len(curve[0]) <= len(exact[0])  # else the exact curve is written
+    else:  # the exact curve: fewer poles, or already polynomial of low degree
+        assert curve[3] == sum(degrees)
+        assert_close(curve[0], exact[0], atol=0)
+        assert _dense_deviation(s, closed, params, curve) <= 1e-11 * diagonal(s)
+    # the curve passes exactly through the surface at the loop's points (the edges' vertices)
+    geom = shapes._bspline_curve_3d(*curve)
+    assert_close(_occ_points(geom, params), s.evaluate(torch.tensor(closed)).numpy(), atol=1e-12 * diagonal(s))
+
+
+def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monkeypatch):
+    """Each trimming edge's tolerance is the one its 3-D curve was fitted to, the written
+    file passes the check with it, and the exact curves (``EXACT_CURVES``) are still
+    written on request."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    rng = np.random.default_rng(4)  # a wavy rational bicubic height field, 9 x 9 control points over 40 mm
+    xy = np.stack(np.meshgrid(np.linspace(0, 40, 9), np.linspace(0, 40, 9), indexing="ij"), axis=-1)
+    cp = np.concatenate([xy, 3 * np.sin(xy[..., :1] / 7) + rng.normal(0, 0.5, (9, 9, 1))], axis=-1)
+    s = nurbskit.NURBSSurface(torch.tensor(cp), (3, 3), None, torch.tensor(rng.uniform(0.8, 1.25, (9, 9))))
+    th = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    (u0, u1), (v0, v1) = s.domain
+    centre, size = np.array([(u0 + u1) / 2, (v0 + v1) / 2]), np.array([u1 - u0, v1 - v0])
+    circle = np.stack([np.cos(th), np.sin(th)], 1)
+    outer = TrimLoop.from_uv(centre + 0.45 * size * circle)
+    hole = TrimLoop(centre + 0.2 * size * circle, "hole")
+    patch = TrimmedSurface(s, [outer, hole])
+    expected = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0))
+
+    def edges(face):
+        exp, found = TopExp_Explorer(face, TopAbs_EDGE), []
+        while exp.More():
+            edge = TopoDS.Edge(exp.Current())
+            found.append((BRep_Tool.Tolerance_s(edge), BRep_Tool.Curve_s(edge, 0.0, 1.0).Degree()))
+            exp.Next()
+        return np.array(found)
+
+    approximated = edges(shapes.face_of(patch))
+    assert_close(approximated[:, 0], np.full(len(approximated), expected), rtol=1e-12)
+    assert set(approximated[:, 1]) == {shapes.APPROX_DEGREE}
+    assert cad.write_cad(patch, tmp_path / "approximated.step")["valid"]
+    monkeypatch.setattr(shapes, "EXACT_CURVES", True)
+    assert set(edges(shapes.face_of(patch))[:, 1]) == {6}
+    assert cad.write_cad(patch, tmp_path / "exact.step")["valid"]
+
+
 def test_a_loop_outside_the_domain_is_refused():
     s = nurbskit.NURBSSurface(torch.rand(4, 4, 3, dtype=torch.float64), (3, 3))
     loop = TrimLoop.from_uv([[0.2, 0.2], [1.4, 0.2], [0.5, 0.8]])

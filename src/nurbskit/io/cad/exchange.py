@@ -83,8 +83,15 @@ def _write_step(shape, path: Path) -> None:
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to STEP ({status})")
     model = writer.Model()
-    # 17 significant digits (see the module docstring); '%E' keeps the decimal point STEP needs
-    _print_model(StepData_StepWriter(model), model.Protocol(), "%.17f", path, "STEP")
+    # 17 significant digits (see the module docstring)
+    _print_model(StepData_StepWriter(model), model.Protocol(), MID_RANGE_FORMAT, path, "STEP")
+
+
+#: how reals between 0.1 and 1000 are printed (the others: ``%.16E``): 17 significant
+#: digits, which give back every double exactly; ``#`` keeps the decimal point that STEP
+#: and IGES reals need ('%.17f' printed up to 20 digits: 3 more characters per number
+#: between 100 and 1000)
+MID_RANGE_FORMAT = "%#.17G"
 
 
 def _print_model(out, protocol, mid_range_format: str, path: Path, what: str) -> None:
@@ -108,7 +115,7 @@ def _write_iges(shape, path: Path) -> None:
         raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to IGES")
     writer.ComputeModel()
     # 17 significant digits instead of OCC's 9 ('%11.9E'); see the module docstring
-    _print_model(IGESData_IGESWriter(writer.Model()), IGESSolid.Protocol_s(), "%.16E", path, "IGES")
+    _print_model(IGESData_IGESWriter(writer.Model()), IGESSolid.Protocol_s(), MID_RANGE_FORMAT, path, "IGES")
 
 
 def _write_brep(shape, path: Path) -> None:

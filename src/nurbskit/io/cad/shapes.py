@@ -6,11 +6,13 @@ Convention:
     trimming loop (a closed polyline in (u, v)) becomes a wire of edges of
     ``EDGE_SEGMENTS`` polyline segments (why: at ``EDGE_SEGMENTS``); an edge's curve on
     the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
-    parameter = cumulative chord length in (u, v) along the loop), and its 3-D curve is
-    its piece of the exact image of the polyline: along a straight (u, v) segment the
-    surface point is a polynomial of degree ``p + q`` (homogeneous coordinates) within a
-    knot span, so the 3-D curve is a rational B-spline of that degree, computed by
-    :func:`loop_curve_3d` (no approximation, unlike OCC's ``BRepLib::BuildCurves3d``).
+    parameter = cumulative chord length in (u, v) along the loop: the exact trim), and
+    its 3-D curve is its piece of a polynomial approximation of the polyline's image
+    within the edge's tolerance (``CURVE_TOLERANCE`` of the surface's size, which the
+    edge carries; :func:`approximate_loop_curves_3d`). The exact image is rational of
+    degree ``p + q`` (:func:`loop_curve_3d`: along a straight (u, v) segment the surface
+    point is a polynomial of degree ``p + q`` in homogeneous coordinates within a knot
+    span), written where it is smaller or with ``EXACT_CURVES``.
     A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
     face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
@@ -42,8 +44,13 @@ from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_
 
 #: default modelling tolerance (model units, millimetres): OCC's Precision::Confusion is 1e-7
 TOLERANCE = 1e-7
-#: tolerance of the edges on trimming loops, relative to the surface's size (their 3-D curves are exact)
-CURVE_TOLERANCE = 1e-9
+#: tolerance of the edges on trimming loops, relative to the surface's size (the diagonal
+#: of its control points, at least 1): their 3-D curves lie within it of the exact image
+#: of the pcurve (:func:`approximate_loop_curves_3d`); 1e-7 of a 15 mm patch is 1.5 nm
+CURVE_TOLERANCE = 1e-7
+#: True: the 3-D curves of trimming loops are the exact rational images (:func:`loop_curves_3d`,
+#: degree p + q) instead of approximations within the edge's tolerance
+EXACT_CURVES = False
 #: reading: curved pcurves become polylines within this (u, v) distance (relative to the
 #: face's (u, v) extent) and this turning angle (radians) per segment; a circular hole of
 #: radius 3 in a 64 x 64 face then has about 65 points and loses 0.2 % of its area (finer loops
@@ -127,8 +134,9 @@ def _homogeneous_points(surface, net: np.ndarray, uv: np.ndarray, span_uv: np.nd
         values.append(basis.numpy())
         index.append(spans.numpy()[:, None] - degree + np.arange(degree + 1))
     block = net[index[0][:, :, None], index[1][:, None, :]]  # (M, p + 1, q + 1, 4)
-    weights = values[0][:, :, None, None] * values[1][:, None, :, None]  # (M, p + 1, q + 1, 1)
-    return (weights * block).sum(axis=(1, 2))
+    # sum_ij N_i(u) N_j(v) P_ij: the (p + 1)(q + 1) products, then one contraction
+    weights = (values[0][:, :, None] * values[1][:, None, :]).reshape(len(uv), -1)
+    return np.einsum("mk,mkc->mc", weights, block.reshape(len(uv), -1, block.shape[-1]))
 
 
 def loop_curve_3d(surface, uv: np.ndarray, params: np.ndarray):
@@ -155,6 +163,26 @@ def loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[
     """:func:`loop_curve_3d` for several ``(uv, params)`` loops on one surface, with one
     evaluation of the surface for all of them (the evaluation's set-up dominates for
     loops of a few dozen points)."""
+    d = sum(surface.degrees)
+    out = []
+    rational = bool(surface.is_rational)
+    for s_start, s_end, coeff in _exact_pieces(surface, loops):
+        poles_h = np.concatenate([coeff[:1, 0], coeff[:, 1:].reshape(-1, 4)])
+        weights = poles_h[:, 3]
+        if np.any(weights <= 0):  # pragma: no cover - positive weights give positive Bernstein coefficients
+            raise NurbskitError("a trimming loop's 3-D curve has non-positive weights")
+        poles = poles_h[:, :3] / weights[:, None]
+        flat = np.concatenate([[s_start[0]] * (d + 1), np.repeat(s_start[1:], d), [s_end[-1]] * (d + 1)])
+        out.append((poles, (weights if rational else None), flat, d))
+    return out
+
+
+def _exact_pieces(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple]:
+    """The exact image of each closed (u, v) polyline on ``surface``, piece by piece:
+    per loop ``(s_start (P,), s_end (P,), coeff (P, p + q + 1, 4))``, the homogeneous
+    Bernstein coefficients of each piece (between the polyline's points and its crossings
+    of the knot lines; see :func:`loop_curve_3d`), neighbouring pieces sharing their end
+    coefficient."""
     (p, q) = surface.degrees
     d = p + q
     (u0, u1), (v0, v1) = surface.domain
@@ -173,21 +201,128 @@ def loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[
         all_mids.append(np.repeat(0.5 * (starts + ends), d + 1, axis=0))  # the piece's knot span
     h_all = _homogeneous_points(surface, _homogeneous_net(surface), np.vstack(all_nodes), np.vstack(all_mids))
     out, offset = [], 0
-    rational = bool(surface.is_rational)
     for (s_start, s_end), nodes in zip(pieces, all_nodes):
         h = h_all[offset:offset + len(nodes)].reshape(-1, d + 1, 4)
         offset += len(nodes)
         coeff = np.einsum("jk,pkc->pjc", inverse, h)
         coeff[:, 0], coeff[:, -1] = h[:, 0], h[:, -1]  # the ends interpolate exactly
         coeff[1:, 0] = coeff[:-1, -1]  # neighbouring pieces share their end pole
-        poles_h = np.concatenate([coeff[:1, 0], coeff[:, 1:].reshape(-1, 4)])
-        weights = poles_h[:, 3]
-        if np.any(weights <= 0):  # pragma: no cover - positive weights give positive Bernstein coefficients
-            raise NurbskitError("a trimming loop's 3-D curve has non-positive weights")
-        poles = poles_h[:, :3] / weights[:, None]
-        flat = np.concatenate([[s_start[0]] * (d + 1), np.repeat(s_start[1:], d), [s_end[-1]] * (d + 1)])
-        out.append((poles, (weights if rational else None), flat, d))
+        out.append((s_start, s_end, coeff))
     return out
+
+
+#: degree of the approximated 3-D trimming curves (:func:`approximate_loop_curves_3d`)
+APPROX_DEGREE = 4
+#: an approximated piece is accepted when its largest deviation at its check points is
+#: within this fraction of the edge's tolerance (the rest is margin for the deviation
+#: between check points; tests/test_io_cad.py measures it densely)
+APPROX_MARGIN = 0.5
+#: a piece is halved at most this many times; past that the surface's loops get the
+#: exact curves (:func:`loop_curves_3d`)
+APPROX_MAX_HALVINGS = 10
+
+
+def approximate_loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]], tolerance: float) -> list[tuple]:
+    """3-D images of closed (u, v) polylines on ``surface`` as polynomial (non-rational)
+    B-splines of degree :data:`APPROX_DEGREE` within ``tolerance`` (model units) of the
+    exact image ``S(u(t), v(t))``.
+
+    Why: the exact image (:func:`loop_curves_3d`) is rational of degree ``p + q`` with
+    ``p + q`` poles per piece; for bicubic patches it was three quarters of a STEP file,
+    and writing, reading back and checking it most of the time of ``write_cad``. CAD
+    systems keep a 3-D edge curve within the edge's tolerance of the curve on the surface
+    (the pcurve, which stays the exact trim); ``face_of`` gives the edge that tolerance,
+    and ``BRepCheck_Analyzer`` (the check after writing) verifies it.
+
+    Method: the exact image, piece by piece (:func:`_exact_pieces`: rational Bezier
+    pieces between the loop's points and its crossings of the knot lines), is
+    interpolated on each piece at ``APPROX_DEGREE + 1`` Chebyshev-Lobatto nodes in the
+    Bernstein basis (the ends exactly); its deviation from the exact piece is measured
+    half-way between the nodes (where an interpolant strays most) and at the quarter
+    points, and a piece deviating more than ``APPROX_MARGIN * tolerance`` is halved and
+    tried again. Evaluating the exact Bezier pieces costs no surface evaluation. Pieces
+    join with C0 knots; the parameter is the polyline's (``params``), so the 3-D curve and
+    the pcurve are the same curve on the surface within ``tolerance``.
+
+    Args:
+        loops: ``(uv (L + 1, 2), params (L + 1,))`` per loop, as :func:`loop_curves_3d`.
+        tolerance: the largest deviation allowed, model units.
+
+    Returns:
+        Per loop ``(poles (M, 3), None, flat knots, degree)``; the exact curves of
+        :func:`loop_curves_3d` where the exact image is already polynomial of degree
+        ``<= APPROX_DEGREE`` (a non-rational surface with ``p + q`` that low), where the
+        approximation needs more poles than the exact curves (a strongly curved surface
+        with few knots), or where a piece still deviates after ``APPROX_MAX_HALVINGS``
+        halvings.
+    """
+    k = APPROX_DEGREE
+    d = sum(surface.degrees)
+    if d <= k and not surface.is_rational:
+        return loop_curves_3d(surface, loops)
+    exact = _exact_pieces(surface, loops)
+    tau, inverse = _bernstein_inverse(k)
+    checks = np.unique(np.concatenate([0.5 * (tau[1:] + tau[:-1]), [0.25, 0.75]]))
+    local = np.concatenate([tau, checks])  # where a sub-piece is evaluated, in [0, 1]
+    check_basis = _bernstein_matrix(k, checks)  # (C, k + 1)
+    coeff = np.concatenate([c for _, _, c in exact])  # (P, d + 1, 4)
+    which = np.concatenate([np.full(len(c), i) for i, (_, _, c) in enumerate(exact)])
+    sa, sb = np.concatenate([e[0] for e in exact]), np.concatenate([e[1] for e in exact])
+    piece = np.arange(len(coeff))  # the exact piece a sub-piece lies on
+    lo, hi = np.zeros(len(coeff)), np.ones(len(coeff))  # the sub-piece, in the piece's [0, 1]
+    done = []  # accepted sub-pieces: (loop, s_start, s_end, poles (P, k + 1, 3))
+    first = True
+    for _ in range(APPROX_MAX_HALVINGS + 1):
+        if first:  # whole pieces: one Bernstein matrix for all
+            h = _bernstein_matrix(d, local) @ coeff  # (m, n, 4)
+            first = False
+        else:
+            t = lo[:, None] + local[None, :] * (hi - lo)[:, None]  # (m, n)
+            h = _bernstein_matrix(d, t) @ coeff[piece]  # (m, n, 4)
+        xyz = h[..., :3] / h[..., 3:]
+        poles = inverse @ xyz[:, :k + 1]  # (m, k + 1, 3)
+        poles[:, 0], poles[:, -1] = xyz[:, 0], xyz[:, k]  # the ends interpolate exactly
+        error = np.linalg.norm(check_basis @ poles - xyz[:, k + 1:], axis=-1).max(axis=1)
+        good = error <= APPROX_MARGIN * tolerance
+        a, b = sa[piece[good]], sb[piece[good]]
+        s_lo = np.where(lo[good] == 0, a, a + lo[good] * (b - a))  # piece ends: exactly
+        s_hi = np.where(hi[good] == 1, b, a + hi[good] * (b - a))
+        done.append((which[piece[good]], s_lo, s_hi, poles[good]))
+        bad = ~good
+        if not bad.any():
+            break
+        mid = 0.5 * (lo[bad] + hi[bad])
+        piece = np.concatenate([piece[bad], piece[bad]])
+        lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
+    else:
+        return loop_curves_3d(surface, loops)  # a piece the approximation does not reach: exact
+    loop, s_lo, s_hi, poles = (np.concatenate(parts) for parts in zip(*done))
+    if len(loop) * k > len(coeff) * d:  # more poles than the exact curves (weights aside): those
+        return loop_curves_3d(surface, loops)
+    order = np.lexsort((s_lo, loop))
+    loop, s_lo, s_hi, poles = loop[order], s_lo[order], s_hi[order], poles[order]
+    out = []
+    for index in range(len(loops)):
+        sel = loop == index
+        starts, ends, own = s_lo[sel], s_hi[sel], poles[sel]
+        # each sub-piece's poles but its last (the next one's first); closed: the first again
+        merged = np.concatenate([own[:, :-1].reshape(-1, 3), own[0, :1]])
+        flat = np.concatenate([[starts[0]] * (k + 1), np.repeat(starts[1:], k), [ends[-1]] * (k + 1)])
+        out.append((merged, None, flat, k))
+    return out
+
+
+def _bernstein_matrix(degree: int, t: np.ndarray) -> np.ndarray:
+    """Bernstein polynomials of ``degree`` at ``t (*,)``: ``(*, degree + 1)``."""
+    from math import comb
+
+    binomial = np.array([comb(degree, i) for i in range(degree + 1)], dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    # powers by running products (exact for 0 and 1, and far cheaper than ``**``)
+    ones = np.ones(t.shape)
+    up = np.cumprod(np.concatenate([ones] + [t] * degree, axis=-1), axis=-1)  # t^j
+    down = np.cumprod(np.concatenate([ones] + [1 - t] * degree, axis=-1), axis=-1)[..., ::-1]  # (1 - t)^(d - j)
+    return binomial * up * down
 
 
 def _loop_pieces(uv: np.ndarray, params: np.ndarray, inner: list[np.ndarray]):
@@ -345,9 +480,12 @@ def face_of(obj, tolerance: float = TOLERANCE):
     size = max(_surface_size(trimmed.surface), 1.0)
     closed = [np.vstack([loop.uv, loop.uv[:1]]) for loop in trimmed.loops]  # the first point again at the end
     params = [_chord_parameters(uv) for uv in closed]
-    curves = loop_curves_3d(trimmed.surface, list(zip(closed, params)))
-    wires = [_loop_wire(uv, t, c, geom, max(tolerance, CURVE_TOLERANCE * size))
-             for uv, t, c in zip(closed, params, curves)]
+    edge_tolerance = max(tolerance, CURVE_TOLERANCE * size)
+    if EXACT_CURVES:
+        curves = loop_curves_3d(trimmed.surface, list(zip(closed, params)))
+    else:
+        curves = approximate_loop_curves_3d(trimmed.surface, list(zip(closed, params)), edge_tolerance)
+    wires = [_loop_wire(uv, t, c, geom, edge_tolerance) for uv, t, c in zip(closed, params, curves)]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
         maker = BRepBuilderAPI_MakeFace(BRepBuilderAPI_MakeFace(geom, tolerance).Face())
