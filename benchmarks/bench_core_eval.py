@@ -184,6 +184,38 @@ def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict
     return rows
 
 
+def batch_calls(batch: NURBSSurface, singles: list, cp: torch.Tensor, w: torch.Tensor, r: int) -> dict:
+    """The four calls the batch question times, on a grid of ``r^2``.
+
+    ``bf`` / ``bfb``: the batch ``(64, n, n, 3)`` forward / forward + backward to ``cp`` and
+    ``w`` (the batch's control points and weights, leaves); ``lf`` / ``lfb``: the same as a
+    Python loop over ``singles``, element ``i`` taking ``cp[i]`` and ``w[i]``. The loss is
+    ``square().sum()`` of the samples, summed over the elements in the loop.
+    ``bench_core_versions.py`` times these same calls for several source trees.
+    """
+    def bf():
+        with torch.no_grad():
+            batch.sample(r)
+
+    def bfb():
+        cp.grad = w.grad = None
+        batch._replace(control_points=cp, weights=w).sample(r).square().sum().backward()
+
+    def lf():
+        with torch.no_grad():
+            for s in singles:
+                s.sample(r)
+
+    def lfb():
+        cp.grad = w.grad = None
+        total = 0
+        for i, s in enumerate(singles):
+            total = total + s._replace(control_points=cp[i], weights=w[i]).sample(r).square().sum()
+        total.backward()
+
+    return {"bf": bf, "bfb": bfb, "lf": lf, "lfb": lfb}
+
+
 def loop_overhead(batch, singles, cp, w, r: int, reps: int, sync) -> dict:
     """What a loop pays per surface beyond the arithmetic, and the batch-vs-loop ceiling it allows.
 
@@ -197,30 +229,14 @@ def loop_overhead(batch, singles, cp, w, r: int, reps: int, sync) -> dict:
     depend on the load).
     """
     count = len(singles)
+    tiny, full = batch_calls(batch, singles, cp, w, 2), batch_calls(batch, singles, cp, w, r)
 
-    def looped(res):
-        def run():
-            cp.grad = w.grad = None
-            total = 0
-            for i, s in enumerate(singles):
-                total = total + s._replace(control_points=cp[i], weights=w[i]).sample(res).square().sum()
-            total.backward()
-        return run
-
-    def batched(res):
-        def run():
-            cp.grad = w.grad = None
-            batch._replace(control_points=cp, weights=w).sample(res).square().sum().backward()
-        return run
-
-    with torch.no_grad():
-        looped_f = timeit(lambda: [s.sample(2) for s in singles], repeats=reps, min_time=0.05, sync=sync)
-        batched_f = timeit(lambda: batch.sample(2), repeats=reps, min_time=0.05, sync=sync)
-    looped_tiny = timeit(looped(2), repeats=reps, min_time=0.05, sync=sync)
-    batched_tiny = timeit(batched(2), repeats=reps, min_time=0.05, sync=sync)
-    batched_full = timeit(batched(r), repeats=reps, min_time=0.05, sync=sync)
-    with torch.no_grad():
-        batched_full_f = timeit(lambda: batch.sample(r), repeats=reps, min_time=0.05, sync=sync)
+    looped_f = timeit(tiny["lf"], repeats=reps, min_time=0.05, sync=sync)
+    batched_f = timeit(tiny["bf"], repeats=reps, min_time=0.05, sync=sync)
+    looped_tiny = timeit(tiny["lfb"], repeats=reps, min_time=0.05, sync=sync)
+    batched_tiny = timeit(tiny["bfb"], repeats=reps, min_time=0.05, sync=sync)
+    batched_full = timeit(full["bfb"], repeats=reps, min_time=0.05, sync=sync)
+    batched_full_f = timeit(full["bf"], repeats=reps, min_time=0.05, sync=sync)
     s0 = singles[0]
     s0.sample(r)
     with OperationCounter() as fwd_ops:
@@ -256,34 +272,16 @@ def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
     singles = [batch[i] for i in range(count)]
     reps = 3 if quick else 7
 
-    def batched_forward():
-        with torch.no_grad():
-            batch.sample(r)
-
-    def looped_forward():
-        with torch.no_grad():
-            for s in singles:
-                s.sample(r)
-
-    def batched_fwd_bwd():
-        cp.grad = w.grad = None
-        batch._replace(control_points=cp, weights=w).sample(r).square().sum().backward()
-
-    def looped_fwd_bwd():
-        cp.grad = w.grad = None
-        total = 0
-        for i, s in enumerate(singles):
-            total = total + s._replace(control_points=cp[i], weights=w[i]).sample(r).square().sum()
-        total.backward()
+    calls = batch_calls(batch, singles, cp, w, r)
 
     # the batch equals the loop (same float32 arithmetic, another order)
     with torch.no_grad():
         diff = float((batch.sample(r) - torch.stack([s.sample(r) for s in singles])).abs().max())
     row = {"surfaces": count, "control": "16x16", "grid": f"{r}^2",
-           "batched_forward_ms": timeit(batched_forward, repeats=reps, min_time=0.05, sync=sync) * 1e3,
-           "looped_forward_ms": timeit(looped_forward, repeats=reps, min_time=0.05, sync=sync) * 1e3,
-           "batched_fwd_bwd_ms": timeit(batched_fwd_bwd, repeats=reps, min_time=0.05, sync=sync) * 1e3,
-           "looped_fwd_bwd_ms": timeit(looped_fwd_bwd, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "batched_forward_ms": timeit(calls["bf"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "looped_forward_ms": timeit(calls["lf"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "batched_fwd_bwd_ms": timeit(calls["bfb"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
+           "looped_fwd_bwd_ms": timeit(calls["lfb"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
            "max_abs_diff_batch_vs_loop": diff}
     row["x_loop_forward"] = row["looped_forward_ms"] / row["batched_forward_ms"]
     row["x_loop_fwd_bwd"] = row["looped_fwd_bwd_ms"] / row["batched_fwd_bwd_ms"]

@@ -35,6 +35,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import write_results  # noqa: E402
+from bench_core_eval import batch_calls  # noqa: E402  (the same calls bench_core_eval times)
 
 DEFAULT_CASES = ["f:64", "f:256", "f:512", "fb:64", "fb:256", "fb:512", "fbk:64", "fbk:256", "fbk:512",
                  "bf:128", "lf:128", "bfb:128", "lfb:128", "bf:2", "lf:2", "bfb:2", "lfb:2"]
@@ -69,28 +70,7 @@ def case_fn(module, case: str):
         b = make(NS, 16, (64,), 1)
         cp, w = b.control_points.clone().requires_grad_(), b.weights.clone().requires_grad_()
         singles = [b[i] for i in range(64)]
-
-        def bf():
-            with torch.no_grad():
-                b.sample(r)
-
-        def bfb():
-            cp.grad = w.grad = None
-            b._replace(control_points=cp, weights=w).sample(r).square().sum().backward()
-
-        def lf():
-            with torch.no_grad():
-                for s in singles:
-                    s.sample(r)
-
-        def lfb():
-            cp.grad = w.grad = None
-            total = 0
-            for i, s in enumerate(singles):
-                total = total + s._replace(control_points=cp[i], weights=w[i]).sample(r).square().sum()
-            total.backward()
-
-        return {"bf": bf, "bfb": bfb, "lf": lf, "lfb": lfb}[kind]
+        return batch_calls(b, singles, cp, w, r)[kind]
     base = make(NS, 32)
     u = torch.linspace(0, 1, r)
     unchecked = base._replace()
