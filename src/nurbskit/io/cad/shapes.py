@@ -405,9 +405,9 @@ class _BatchEvaluator:
             index.append(spans.numpy()[face, rank][:, None] - degree + np.arange(degree + 1))
         nu, nv = self.sizes
         flat = (face[:, None, None] * (nu * nv) + index[0][:, :, None] * nv + index[1][:, None, :])
-        block = self.net[flat]  # (N, p + 1, q + 1, 4)
+        block = np.take(self.net, flat, axis=0)  # (N, p + 1, q + 1, 4); take: 4x faster than [flat]
         weights = values[0][:, :, None] * values[1][:, None, :]
-        h = np.einsum("nij,nijc->nc", weights, block)
+        h = np.matmul(weights.reshape(len(face), 1, -1), block.reshape(len(face), -1, 4))[:, 0]  # (N, 4)
         return h[:, :3] / h[:, 3:]
 
 
@@ -567,12 +567,12 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
     return wire
 
 
-def face_of(obj, tolerance: float = TOLERANCE, *, curves: list[tuple] | None = None):
+def face_of(obj, tolerance: float = TOLERANCE, *, prepared: tuple | None = None):
     """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops).
 
-    ``curves``: the 3-D curves of the loops, as :func:`approximate_trim_curves` gives them
-    for this surface (``to_shape`` computes them for all its surfaces at once); default:
-    computed here."""
+    ``prepared``: ``(closed loops, their parameters, edge tolerance, 3-D curves)`` of a
+    TrimmedSurface, as ``to_shape`` computes them for all its surfaces at once
+    (:func:`_trim_job`, :func:`approximate_trim_curves`); default: computed here."""
     ocp()
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
 
@@ -583,9 +583,11 @@ def face_of(obj, tolerance: float = TOLERANCE, *, curves: list[tuple] | None = N
         if not maker.IsDone():
             raise NurbskitError(f"OpenCASCADE could not make a face from this surface (error {maker.Error()})")
         return maker.Face()
-    closed, params, edge_tolerance = _trim_job(trimmed, tolerance)
-    if curves is None:
+    if prepared is None:
+        closed, params, edge_tolerance = _trim_job(trimmed, tolerance)
         curves = _trim_curves([(trimmed.surface, list(zip(closed, params)), edge_tolerance)])[0]
+    else:
+        closed, params, edge_tolerance, curves = prepared
     wires = [_loop_wire(uv, t, c, geom, edge_tolerance) for uv, t, c in zip(closed, params, curves)]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
@@ -738,8 +740,9 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
     # the trimming loops' 3-D curves of every trimmed surface at once (one batch per round)
     trimmed = [i for i, item in enumerate(items) if isinstance(item, TrimmedSurface) and item.loops]
     prepared = [_trim_job(items[i], tolerance) for i in trimmed]
-    curves = dict(zip(trimmed, _trim_curves([(items[i].surface, list(zip(closed, params)), edge_tolerance)
-                                             for i, (closed, params, edge_tolerance) in zip(trimmed, prepared)])))
+    curves = _trim_curves([(items[i].surface, list(zip(closed, params)), edge_tolerance)
+                           for i, (closed, params, edge_tolerance) in zip(trimmed, prepared)])
+    prepared = {i: (*job, c) for i, job, c in zip(trimmed, prepared, curves)}
     shapes, faces = [], []
     for index, item in enumerate(items):
         if _is_mesh_tuple(item):
@@ -749,7 +752,7 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
         elif is_swept(item):
             faces.append(swept_face(item, tolerance) if analytic else face_of(item.to_nurbs(), tolerance))
         elif isinstance(item, TrimmedSurface) or getattr(item, "kind", None) == "surface":
-            faces.append(face_of(item, tolerance, curves=curves.get(index)))
+            faces.append(face_of(item, tolerance, prepared=prepared.get(index)))
         elif getattr(item, "kind", None) == "curve":
             shapes.append(edge_of(item))
         elif getattr(item, "kind", None) == "volume":
