@@ -370,39 +370,50 @@ class _BatchEvaluator:
     ``face (N,)`` (which surface) and ``uv (N, 2)``, returns ``S_face(uv) (N, 3)``.
 
     The non-zero basis functions (The NURBS Book A2.2) come from nurbskit's
-    :func:`~nurbskit.core.basis.basis_functions` with one knot vector per surface (the
-    points padded to the same count per surface), the sum over the ``(p + 1) x (q + 1)``
-    control points (A3.5 for the homogeneous net, then the division by the weight) from
-    one gather and one contraction in NumPy."""
+    :func:`~nurbskit.core.basis.basis_functions`: with the one knot vector of a direction
+    where every surface has the same (patches of one fit usually do), else with one knot
+    vector per surface (the points padded to the same count per surface); the sum over
+    the ``(p + 1) x (q + 1)`` control points (A3.5 for the homogeneous net, then the
+    division by the weight) from one gather and one contraction in NumPy."""
 
     def __init__(self, surfaces):
         self.degrees = tuple(surfaces[0].degrees)
         self.sizes = tuple(surfaces[0].sizes)
-        self.knots = [torch.stack([s.knot_vectors[axis].detach().cpu().double() for s in surfaces])
-                      for axis in (0, 1)]  # (F, n + p + 1) per direction
+        self.knots = []  # per direction (m,) shared or (F, m)
+        for axis in (0, 1):
+            knots = torch.stack([s.knot_vectors[axis].detach().cpu().double() for s in surfaces])
+            self.knots.append(knots[0] if bool((knots == knots[:1]).all()) else knots)
+        self.count = len(surfaces)
         self.net = np.stack([_homogeneous_net(s) for s in surfaces]).reshape(-1, 4)  # (F * nu * nv, 4)
 
     def __call__(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
         from ...core.basis import basis_functions
         from ...core.knots import find_spans
 
-        count = len(self.knots[0])
-        order = np.argsort(face, kind="stable")
-        per_face = np.bincount(face, minlength=count)
-        rank = np.empty(len(face), dtype=np.int64)
-        rank[order] = np.arange(len(face)) - np.repeat(np.cumsum(per_face) - per_face, per_face)
-        width = int(per_face.max())
-        index = []
-        values = []
+        slot = width = None
+        index, values = [], []
         for axis, (degree, size) in enumerate(zip(self.degrees, self.sizes)):
             knots = self.knots[axis]
+            if knots.ndim == 1:  # one knot vector for all
+                u = torch.from_numpy(np.ascontiguousarray(uv[:, axis]))
+                spans = find_spans(knots, degree, size, u)
+                values.append(basis_functions(knots, degree, spans, u).numpy())  # (N, p + 1)
+                index.append(spans.numpy()[:, None] - degree + np.arange(degree + 1))
+                continue
+            if slot is None:  # each point's place in its surface's row of the padded (F, width) layout
+                per_face = np.bincount(face, minlength=self.count)
+                rank = np.empty(len(face), dtype=np.int64)
+                rank[np.argsort(face, kind="stable")] = (np.arange(len(face))
+                                                         - np.repeat(np.cumsum(per_face) - per_face, per_face))
+                width = int(per_face.max())
+                slot = face * width + rank
             padded = knots[:, degree:degree + 1].numpy().repeat(width, axis=1)  # the domain's start
-            padded[face, rank] = uv[:, axis]
+            padded.reshape(-1)[slot] = uv[:, axis]
             u = torch.from_numpy(padded)
             spans = find_spans(knots, degree, size, u)
             basis = basis_functions(knots, degree, spans, u)  # (F, width, p + 1)
-            values.append(basis.numpy()[face, rank])
-            index.append(spans.numpy()[face, rank][:, None] - degree + np.arange(degree + 1))
+            values.append(np.take(basis.numpy().reshape(-1, degree + 1), slot, axis=0))
+            index.append(np.take(spans.numpy().reshape(-1), slot)[:, None] - degree + np.arange(degree + 1))
         nu, nv = self.sizes
         flat = (face[:, None, None] * (nu * nv) + index[0][:, :, None] * nv + index[1][:, None, :])
         block = np.take(self.net, flat, axis=0)  # (N, p + 1, q + 1, 4); take: 4x faster than [flat]
