@@ -46,8 +46,12 @@ from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_
 TOLERANCE = 1e-7
 #: tolerance of the edges on trimming loops, relative to the surface's size (the diagonal
 #: of its control points, at least 1): their 3-D curves lie within it of the exact image
-#: of the pcurve (:func:`approximate_loop_curves_3d`); 1e-7 of a 15 mm patch is 1.5 nm
-CURVE_TOLERANCE = 1e-7
+#: of the pcurve (:func:`approximate_loop_curves_3d`). 1e-6 of a 15 mm patch is 15 nm,
+#: Parasolid's linear resolution (1e-8 m); of a 1 m part 1 um, the 0.001 mm CAD systems
+#: model to (OCC's Precision::Confusion, 1e-7 mm, is the floor: ``TOLERANCE``). The pcurves
+#: stay exact. Poles per loop of benchmarks/bench_cad.py's patches (degree 4): 312 at 1e-7,
+#: 220 at 1e-6, 193 at 1e-5; what that costs in writing and checking: docs/cad.md
+CURVE_TOLERANCE = 1e-6
 #: True: the 3-D curves of trimming loops are the exact rational images (:func:`loop_curves_3d`,
 #: degree p + q) instead of approximations within the edge's tolerance
 EXACT_CURVES = False
