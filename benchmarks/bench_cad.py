@@ -430,7 +430,7 @@ def main(argv=None) -> int:
         "edge_segments": shapes.EDGE_SEGMENTS,
         "written_curve_poles_per_loop": float(np.sum(exact_poles)) / (2 * len(patches)),
         "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
-        "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
+        "shape_s": t_shape, "shape_s_occ_build_curves3d": t_approx,
         "repeats": args.repeats, "torch_threads": 1, "ablation": ablation_rows,
         "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
     }
@@ -456,7 +456,7 @@ def main(argv=None) -> int:
              f"tolerance. Written: {meta['written_curve_poles_per_loop']:.0f} poles per loop (over its edges). "
              f"`exact curves` columns: shape + write + check with the exact curves (the previous writer), same run. "
              f"OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
-             f"poles per loop, {t_approx:.2f} s wall against {t_shape:.2f} s for the exact ones. `max_error_rel`: "
+             f"poles per loop, {t_approx:.2f} s wall to build against {t_shape:.2f} s for nurbskit's. `max_error_rel`: "
              "largest |S_back - S| on an 11 x 11 grid per patch over the patch's diagonal. Peer: OCC's own writer on "
              "the same shape (STEP/IGES with 12/9 digits). "
              f"Load average (1 min) {meta['load_average_1min_start']:.1f} at the start and "
