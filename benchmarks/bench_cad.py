@@ -205,7 +205,7 @@ def curve_deviation(patches) -> tuple[float, float, float]:
         s = p.surface
         closed = [np.vstack([lp.uv, lp.uv[:1]]) for lp in p.loops]
         params = [shapes._chord_parameters(c) for c in closed]
-        tol = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(shapes._surface_size(s), 1.0))
+        tol = shapes.edge_tolerance(s)
         curves = shapes.approximate_loop_curves_3d(s, list(zip(closed, params)), tol)
         exact = shapes.loop_curves_3d(s, list(zip(closed, params)))
         for uv, t, c, e in zip(closed, params, curves, exact):
@@ -294,27 +294,33 @@ def stages(patches, fmt: str, repeats: int, tmp: Path) -> dict:
     return {"format": fmt, **best}
 
 
-def tolerance_sweep(patches, tmp: Path, tolerances=(1e-7, 1e-6, 1e-5), rounds: int = 2) -> list[dict]:
-    """STEP stages with the 3-D trimming curves within each tolerance (relative to the
-    diagonal), rounds interleaved; per tolerance the smallest CPU seconds of each stage."""
+#: (degree, tolerance relative to the diagonal) of the 3-D trimming curves compared: the
+#: previous session's (4, 1e-7) and the neighbours of this one's default
+SWEEP = ((4, 1e-7), (4, 1e-6), (4, 1e-5), (3, 1e-6), (3, 5e-6), (3, 1e-5))
+
+
+def tolerance_sweep(patches, tmp: Path, configs=SWEEP, rounds: int = 2) -> list[dict]:
+    """STEP stages with the 3-D trimming curves of each degree and tolerance (relative to
+    the diagonal), rounds interleaved; per configuration the smallest CPU seconds of each stage."""
     from nurbskit.io.cad import shapes
 
-    default, found = shapes.CURVE_TOLERANCE, {}
+    default, found = (shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE), {}
     try:
         for _ in range(rounds):
-            for tol in tolerances:
-                shapes.CURVE_TOLERANCE = tol
+            for config in configs:
+                shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = config
                 row = stages(patches, "step", 1, tmp)
-                old = found.get(tol)
-                found[tol] = row if old is None else {k: (min(v, row[k]) if k.endswith("_s") else v)
-                                                      for k, v in old.items()}
+                old = found.get(config)
+                found[config] = row if old is None else {k: (min(v, row[k]) if k.endswith("_s") else v)
+                                                         for k, v in old.items()}
         rows = []
-        for tol in tolerances:
-            shapes.CURVE_TOLERANCE = tol
+        for config in configs:
+            shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = config
             deviation, per_loop, _ = curve_deviation(patches[:20])
-            rows.append({"curve_tolerance_rel": tol, **found[tol], "deviation_over_tolerance_20_patches": deviation})
+            rows.append({"degree": config[0], "curve_tolerance_rel": config[1], **found[config],
+                         "deviation_over_tolerance_20_patches": deviation})
     finally:
-        shapes.CURVE_TOLERANCE = default
+        shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = default
     return rows
 
 
@@ -450,7 +456,7 @@ def main(argv=None) -> int:
              f"The previous session's writer on the quiet machine: {BEFORE}. "
              f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
              f"3-D trimming curves: polynomial of degree {shapes.APPROX_DEGREE} within the edge tolerance "
-             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm): "
+             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm, at most {shapes.CURVE_TOLERANCE_MAX:g} mm): "
              f"{approx_per_loop:.0f} poles per loop against {exact_per_loop:.0f} for the exact rational curves of "
              f"degree 6; largest deviation from S(pcurve(t)) at 2,001 parameters per loop: {deviation:.2f} of the "
              f"tolerance. Written: {meta['written_curve_poles_per_loop']:.0f} poles per loop (over its edges). "
@@ -482,13 +488,15 @@ def main(argv=None) -> int:
     load = f"Load average (1 min) {load_start:.1f} at the start of the benchmark, {os.getloadavg()[0]:.1f} now."
     path = write_results(
         "cad_curves", sweep_rows,
-        [("curve_tolerance_rel", "3-D curve tolerance / diagonal")] + stage_columns
+        [("degree", "degree"), ("curve_tolerance_rel", "3-D curve tolerance / diagonal")] + stage_columns
         + [("deviation_over_tolerance_20_patches", "largest deviation / tolerance")],
-        meta={"patches": len(patches), "rounds": 2, "edge_segments": shapes.EDGE_SEGMENTS},
+        meta={"patches": len(patches), "rounds": 2, "edge_segments": shapes.EDGE_SEGMENTS,
+              "default": [shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE]},
         title="CAD exchange: the 3-D trimming curves' tolerance (STEP, 100 trimmed patches)",
         notes="STEP written = shape + write + read back (no healing) + BRepCheck_Analyzer (parallel; its CPU seconds "
-              "are both threads'), per tolerance of the 3-D trimming curves relative to the patch diagonal "
-              f"(`shapes.CURVE_TOLERANCE`, default {shapes.CURVE_TOLERANCE:g}); two interleaved rounds after a warm-up, "
+              "are both threads'), per degree and tolerance of the 3-D trimming curves relative to the patch diagonal "
+              f"(`shapes.APPROX_DEGREE`, `shapes.CURVE_TOLERANCE`; default {shapes.APPROX_DEGREE} and "
+              f"{shapes.CURVE_TOLERANCE:g}); two interleaved rounds after a warm-up, "
               "the smallest CPU seconds of each stage. Largest deviation of the 3-D curves from S(pcurve(t)) at 2,001 "
               f"parameters per loop on the first 20 patches. {load}")
     print(path.read_text())

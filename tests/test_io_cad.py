@@ -343,6 +343,7 @@ def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monk
     hole = TrimLoop(centre + 0.2 * size * circle, "hole")
     patch = TrimmedSurface(s, [outer, hole])
     expected = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0))
+    assert expected == shapes.edge_tolerance(s) < shapes.CURVE_TOLERANCE_MAX
 
     def edges(face):
         exp, found = TopExp_Explorer(face, TopAbs_EDGE), []
@@ -359,6 +360,21 @@ def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monk
     monkeypatch.setattr(shapes, "EXACT_CURVES", True)
     assert set(edges(shapes.face_of(patch))[:, 1]) == {6}
     assert cad.write_cad(patch, tmp_path / "exact.step")["valid"]
+
+
+def test_edge_tolerance_is_relative_within_its_bounds():
+    """The trimming edges' tolerance is CURVE_TOLERANCE of the surface's diagonal, never
+    coarser than CURVE_TOLERANCE_MAX (0.001 mm) nor finer than TOLERANCE; a 20 m surface
+    gets the cap and its curves stay within it."""
+    rng = np.random.default_rng(8)
+    for scale in (1e-4, 1.0, 30.0, 2e4):
+        s = random_surface(rng, (3, 3), scale=scale)
+        expected = min(max(shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0), shapes.TOLERANCE), shapes.CURVE_TOLERANCE_MAX)
+        assert shapes.edge_tolerance(s) == expected
+    assert shapes.edge_tolerance(s) == shapes.CURVE_TOLERANCE_MAX  # the 20 m one
+    closed, params = _circle_loop(s, 31)
+    curve = shapes.approximate_loop_curves_3d(s, [(closed, params)], shapes.edge_tolerance(s))[0]
+    assert _dense_deviation(s, closed, params, curve) <= shapes.CURVE_TOLERANCE_MAX
 
 
 def test_a_loop_outside_the_domain_is_refused():

@@ -46,12 +46,14 @@ from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_
 TOLERANCE = 1e-7
 #: tolerance of the edges on trimming loops, relative to the surface's size (the diagonal
 #: of its control points, at least 1): their 3-D curves lie within it of the exact image
-#: of the pcurve (:func:`approximate_loop_curves_3d`). 1e-6 of a 15 mm patch is 15 nm,
-#: Parasolid's linear resolution (1e-8 m); of a 1 m part 1 um, the 0.001 mm CAD systems
-#: model to (OCC's Precision::Confusion, 1e-7 mm, is the floor: ``TOLERANCE``). The pcurves
-#: stay exact. Poles per loop of benchmarks/bench_cad.py's patches (degree 4): 312 at 1e-7,
-#: 220 at 1e-6, 193 at 1e-5; what that costs in writing and checking: docs/cad.md
-CURVE_TOLERANCE = 1e-6
+#: of the pcurve (:func:`approximate_loop_curves_3d`); the pcurves stay exact. 1e-5 of a
+#: 15 mm patch is 0.15 um, of a 100 mm patch 1 um, the 0.001 mm CAD systems model to;
+#: never coarser than ``CURVE_TOLERANCE_MAX`` nor finer than ``TOLERANCE`` (OCC's
+#: Precision::Confusion). Poles per loop of benchmarks/bench_cad.py's patches and what
+#: writing and checking them costs, per tolerance and degree: docs/cad.md
+CURVE_TOLERANCE = 1e-5
+#: the largest edge tolerance of a trimming loop, model units (mm): 0.001 mm
+CURVE_TOLERANCE_MAX = 1e-3
 #: True: the 3-D curves of trimming loops are the exact rational images (:func:`loop_curves_3d`,
 #: degree p + q) instead of approximations within the edge's tolerance
 EXACT_CURVES = False
@@ -215,8 +217,11 @@ def _exact_pieces(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[t
     return out
 
 
-#: degree of the approximated 3-D trimming curves (:func:`approximate_loop_curves_3d`)
-APPROX_DEGREE = 4
+#: degree of the approximated 3-D trimming curves (:func:`approximate_loop_curves_3d`);
+#: cubic: 151 poles per loop of the benchmark's patches at 1e-5 against 193 for degree 4
+#: (a segment between two of the loop's points needs ``degree`` poles however loose the
+#: tolerance), 243 against 220 at 1e-6
+APPROX_DEGREE = 3
 #: an approximated piece is accepted when its largest deviation at its check points is
 #: within this fraction of the edge's tolerance (the rest is margin for the deviation
 #: between check points; tests/test_io_cad.py measures it densely)
@@ -267,7 +272,7 @@ def approximate_trim_curves(jobs: list[tuple]) -> list[list[tuple]]:
     surface, then one contraction with the homogeneous control nets): building the
     faces of 100 patches spent most of its time in per-surface NumPy calls before.
     Starting from the segments rather than the exact Bezier pieces (between the points
-    and every knot-line crossing) gave 220 instead of 282 poles per loop on
+    and every knot-line crossing) gave, at degree 4, 220 instead of 282 poles per loop on
     benchmarks/bench_cad.py's patches at 1e-6 of their diagonal (312 against 326 at 1e-7).
 
     Returns:
@@ -632,10 +637,16 @@ def _trim_job(trimmed: TrimmedSurface, tolerance: float) -> tuple[list, list, fl
         if lo[0] < u0 - slack or hi[0] > u1 + slack or lo[1] < v0 - slack or hi[1] > v1 + slack:
             raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
                               f"(loop bounds {lo.tolist()} to {hi.tolist()})")
-    size = max(_surface_size(trimmed.surface), 1.0)
     closed = [np.vstack([loop.uv, loop.uv[:1]]) for loop in trimmed.loops]
     params = [_chord_parameters(uv) for uv in closed]
-    return closed, params, max(tolerance, CURVE_TOLERANCE * size)
+    return closed, params, edge_tolerance(trimmed.surface, tolerance)
+
+
+def edge_tolerance(surface, tolerance: float = TOLERANCE) -> float:
+    """The tolerance of a trimming edge on ``surface`` (model units): ``CURVE_TOLERANCE``
+    of its size (the diagonal of its control points, at least 1), within
+    ``[tolerance, CURVE_TOLERANCE_MAX]``."""
+    return max(tolerance, min(CURVE_TOLERANCE * max(_surface_size(surface), 1.0), CURVE_TOLERANCE_MAX))
 
 
 def _trim_curves(jobs: list[tuple]) -> list[list[tuple]]:
