@@ -332,7 +332,8 @@ def baseline_runs(rev: str, rounds: int, repeats: int, count: int) -> list[dict]
     root = HERE.parent
     found: dict = {}
     with tempfile.TemporaryDirectory(prefix="bench-cad-base-") as tmp:
-        archive = subprocess.run(["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True).stdout
+        archive = subprocess.run(["git", "-C", str(root), "archive", rev, "src"], check=True,
+                                 capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
         trees = {f"{rev} (before)": str(Path(tmp) / "src"), "this writer": str(root / "src")}
         for _ in range(rounds):
@@ -456,7 +457,8 @@ def main(argv=None) -> int:
              f"The previous session's writer on the quiet machine: {BEFORE}. "
              f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
              f"3-D trimming curves: polynomial of degree {shapes.APPROX_DEGREE} within the edge tolerance "
-             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm, at most {shapes.CURVE_TOLERANCE_MAX:g} mm): "
+             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm, "
+             f"at most {shapes.CURVE_TOLERANCE_MAX:g} mm): "
              f"{approx_per_loop:.0f} poles per loop against {exact_per_loop:.0f} for the exact rational curves of "
              f"degree 6; largest deviation from S(pcurve(t)) at 2,001 parameters per loop: {deviation:.2f} of the "
              f"tolerance. Written: {meta['written_curve_poles_per_loop']:.0f} poles per loop (over its edges). "

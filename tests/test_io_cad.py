@@ -369,7 +369,8 @@ def test_edge_tolerance_is_relative_within_its_bounds():
     rng = np.random.default_rng(8)
     for scale in (1e-4, 1.0, 30.0, 2e4):
         s = random_surface(rng, (3, 3), scale=scale)
-        expected = min(max(shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0), shapes.TOLERANCE), shapes.CURVE_TOLERANCE_MAX)
+        relative = shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0)
+        expected = min(max(relative, shapes.TOLERANCE), shapes.CURVE_TOLERANCE_MAX)
         assert shapes.edge_tolerance(s) == expected
     assert shapes.edge_tolerance(s) == shapes.CURVE_TOLERANCE_MAX  # the 20 m one
     closed, params = _circle_loop(s, 31)

@@ -8,11 +8,11 @@ Convention:
     the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
     parameter = cumulative chord length in (u, v) along the loop: the exact trim), and
     its 3-D curve is its piece of a polynomial approximation of the polyline's image
-    within the edge's tolerance (``CURVE_TOLERANCE`` of the surface's size, which the
-    edge carries; :func:`approximate_loop_curves_3d`). The exact image is rational of
-    degree ``p + q`` (:func:`loop_curve_3d`: along a straight (u, v) segment the surface
-    point is a polynomial of degree ``p + q`` in homogeneous coordinates within a knot
-    span), written where it is smaller or with ``EXACT_CURVES``.
+    within the edge's tolerance (:func:`edge_tolerance`: ``CURVE_TOLERANCE`` of the
+    surface's size, at most 0.001 mm, which the edge carries; :func:`approximate_trim_curves`).
+    The exact image is rational of degree ``p + q`` (:func:`loop_curve_3d`: along a
+    straight (u, v) segment the surface point is a polynomial of degree ``p + q`` in
+    homogeneous coordinates within a knot span), written where it is smaller or with ``EXACT_CURVES``.
     A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
     face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
