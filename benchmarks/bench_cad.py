@@ -37,8 +37,17 @@ poles of the 3-D trimming curves, validity, largest round-trip error at 11 x 11 
 per patch (relative to the patch's diagonal). One torch thread (the evaluations are
 small). Other processes may share the two cores: seconds can be contended.
 
-Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/bench_cad.py [--repeats 3] [--patches 100]``; writes
-``benchmarks/results/cad.json`` and ``.md``.
+Tolerance sweep (``results/cad_curves.*``): STEP shape / write / read back / analyzer CPU
+seconds, file size and poles per loop with the 3-D curves within 1e-7, 1e-6 (the default)
+and 1e-5 of the patch diagonal (``shapes.CURVE_TOLERANCE``), rounds interleaved, the
+smallest of each stage. Before / after (``--baseline REV``, ``results/cad_baseline.*``):
+the writer of commit REV (``git archive``) and this one, each in its own process,
+alternating ``--rounds`` times; per format and stage the smallest CPU seconds over all
+runs (the least disturbed by other processes), and wall seconds of written.
+
+Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/bench_cad.py [--repeats 3] [--patches 100]
+[--baseline 51c9fed --rounds 3]``; writes ``benchmarks/results/cad.json`` and ``.md`` (and
+``cad_curves.*``, ``cad_baseline.*``).
 """
 
 from __future__ import annotations
@@ -58,7 +67,8 @@ import torch  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "src"))
+# NURBSKIT_BENCH_SRC: another source tree (``--baseline`` runs the previous writer's in a subprocess)
+sys.path.insert(0, os.environ.get("NURBSKIT_BENCH_SRC") or str(HERE.parent / "src"))
 
 from _harness import write_results  # noqa: E402
 
@@ -66,9 +76,10 @@ import nurbskit  # noqa: E402
 from nurbskit.core.trim import TrimLoop, TrimmedSurface  # noqa: E402
 
 
-#: the previous session's quiet-machine numbers (exact rational 3-D trimming curves, '%.17f' reals)
-BEFORE = ("written, wall (CPU): STEP 3.04 s (3.31: shape 1.03, write 0.77, check 1.51), IGES 2.65 s (2.88), "
-          "BREP 1.77 s (2.04); STEP 15.7 MB, IGES 23.5 MB, BREP 9.1 MB")
+#: the previous session's quiet-machine numbers (commit 51c9fed: 3-D trimming curves within
+#: 1e-7 of the diagonal, approximated piece by piece, face by face)
+BEFORE = ("written, wall (CPU): STEP 2.04 s (2.23: shape 0.58, write 0.54, check 1.10 = read back 0.67 + "
+          "analyzer 0.43), IGES 1.66 s, BREP 1.07 s; STEP 11.3 MB, 326 poles per loop")
 
 
 def make_patches(count: int, size: int = 12, seed: int = 0) -> list[TrimmedSurface]:
@@ -194,7 +205,7 @@ def curve_deviation(patches) -> tuple[float, float, float]:
         s = p.surface
         closed = [np.vstack([lp.uv, lp.uv[:1]]) for lp in p.loops]
         params = [shapes._chord_parameters(c) for c in closed]
-        tol = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(shapes._surface_size(s), 1.0))
+        tol = shapes.edge_tolerance(s)
         curves = shapes.approximate_loop_curves_3d(s, list(zip(closed, params)), tol)
         exact = shapes.loop_curves_3d(s, list(zip(closed, params)))
         for uv, t, c, e in zip(closed, params, curves, exact):
@@ -244,12 +255,121 @@ def written_exact(patches, path: Path) -> dict:
         shapes.EXACT_CURVES = False
 
 
+def stages(patches, fmt: str, repeats: int, tmp: Path) -> dict:
+    """Smallest CPU seconds (and the wall seconds of that run) of shape, write, read back and
+    analyzer over ``repeats`` runs after a warm-up, for one format."""
+    from nurbskit.io.cad.exchange import read_shape, write_shape
+    from nurbskit.io.cad.shapes import check_shape, to_shape
+
+    path = tmp / f"stages.{fmt}"
+    best = None
+    for run in range(repeats + 1):
+        row, wall = {}, 0.0
+        for name, fn in (("shape", lambda: to_shape(patches, sew_tolerance=None)),
+                         ("write", lambda: write_shape(row["_shape"], path, check=False)),
+                         ("read_back", lambda: read_shape(path, heal=False)),
+                         ("analyzer", lambda: check_shape(row["_back"]))):
+            t, c = time.perf_counter(), time.process_time()
+            result = fn()
+            row[f"{name}_cpu_s"] = time.process_time() - c
+            wall += time.perf_counter() - t
+            if name == "shape":
+                row["_shape"] = result
+            elif name == "read_back":
+                row["_back"] = result
+            elif name == "analyzer":
+                row.update(valid=result["valid"], edges=result["edges"])
+        row["written_cpu_s"] = sum(row[f"{n}_cpu_s"] for n in ("shape", "write", "read_back", "analyzer"))
+        row["written_s"] = wall
+        row["file_mb"] = path.stat().st_size / 1e6
+        poles = curve_poles(row.pop("_shape"))
+        row["poles_per_loop"] = float(np.sum(poles)) / (2 * len(patches))
+        row.pop("_back")
+        if run == 0:
+            continue  # warm-up
+        if best is None:
+            best = row
+        else:
+            best = {k: (min(v, row[k]) if k.endswith("_s") else v) for k, v in best.items()}
+    return {"format": fmt, **best}
+
+
+#: (degree, tolerance relative to the diagonal) of the 3-D trimming curves compared: the
+#: previous session's (4, 1e-7) and the neighbours of this one's default
+SWEEP = ((4, 1e-7), (4, 1e-6), (4, 1e-5), (3, 1e-6), (3, 5e-6), (3, 1e-5))
+
+
+def tolerance_sweep(patches, tmp: Path, configs=SWEEP, rounds: int = 2) -> list[dict]:
+    """STEP stages with the 3-D trimming curves of each degree and tolerance (relative to
+    the diagonal), rounds interleaved; per configuration the smallest CPU seconds of each stage."""
+    from nurbskit.io.cad import shapes
+
+    default, found = (shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE), {}
+    try:
+        for _ in range(rounds):
+            for config in configs:
+                shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = config
+                row = stages(patches, "step", 1, tmp)
+                old = found.get(config)
+                found[config] = row if old is None else {k: (min(v, row[k]) if k.endswith("_s") else v)
+                                                         for k, v in old.items()}
+        rows = []
+        for config in configs:
+            shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = config
+            deviation, per_loop, _ = curve_deviation(patches[:20])
+            rows.append({"degree": config[0], "curve_tolerance_rel": config[1], **found[config],
+                         "deviation_over_tolerance_20_patches": deviation})
+    finally:
+        shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE = default
+    return rows
+
+
+def baseline_runs(rev: str, rounds: int, repeats: int, count: int) -> list[dict]:
+    """The writer of commit ``rev`` and this one, each in its own process, alternating."""
+    import json
+    import subprocess
+
+    root = HERE.parent
+    found: dict = {}
+    with tempfile.TemporaryDirectory(prefix="bench-cad-base-") as tmp:
+        archive = subprocess.run(["git", "-C", str(root), "archive", rev, "src"], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        trees = {f"{rev} (before)": str(Path(tmp) / "src"), "this writer": str(root / "src")}
+        for _ in range(rounds):
+            for label, src in trees.items():
+                env = {**os.environ, "NURBSKIT_BENCH_SRC": src, "OMP_NUM_THREADS": "1"}
+                out = subprocess.run([sys.executable, __file__, "--stages-only", "--repeats", str(repeats),
+                                      "--patches", str(count)], env=env, check=True, capture_output=True, text=True)
+                for line in out.stdout.splitlines():
+                    row = json.loads(line)
+                    key = (label, row["format"])
+                    old = found.get(key)
+                    found[key] = row if old is None else {k: (min(v, row[k]) if k.endswith("_s") else v)
+                                                          for k, v in old.items()}
+    return [{"writer": label, **row} for (label, _), row in found.items()]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--patches", type=int, default=100)
+    parser.add_argument("--baseline", metavar="REV", help="also time the writer of this commit (before / after)")
+    parser.add_argument("--rounds", type=int, default=3, help="alternations of --baseline's processes")
+    parser.add_argument("--stages-only", action="store_true", help=argparse.SUPPRESS)  # one process of --baseline
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    if args.stages_only:
+        import json
+
+        from nurbskit.io.cad.exchange import _quiet
+
+        _quiet()
+        patches = make_patches(args.patches)
+        with tempfile.TemporaryDirectory(prefix="bench-cad-stages-") as tmp:
+            for fmt in ("step", "iges", "brep"):
+                print(json.dumps(stages(patches, fmt, args.repeats, Path(tmp))), flush=True)
+        return 0
 
     from nurbskit.io.cad import read_cad, shapes
     from nurbskit.io.cad.exchange import _quiet, read_shape, write_shape
@@ -306,7 +426,8 @@ def main(argv=None) -> int:
             print(f"{fmt}: written {rows[-1]['written_s']:.2f} s wall, {c_written:.2f} s CPU (shape {c_shape:.2f}, "
                   f"write {c_write:.2f}, check {c_check:.2f}), read {c_read:.2f} s CPU, valid {report['valid']}",
                   file=sys.stderr)
-        ablation_rows = ablation(patches, Path(tmp), sorted({0, 4, 8, shapes.EDGE_SEGMENTS}))
+        ablation_rows = ablation(patches, Path(tmp), sorted({0, 4, 8, 16, shapes.EDGE_SEGMENTS}))
+        sweep_rows = tolerance_sweep(patches, Path(tmp))
     deviation, approx_per_loop, exact_per_loop = curve_deviation(patches)
     meta = {
         "curve_deviation_over_tolerance": deviation, "curve_tolerance_rel": shapes.CURVE_TOLERANCE,
@@ -316,7 +437,7 @@ def main(argv=None) -> int:
         "edge_segments": shapes.EDGE_SEGMENTS,
         "written_curve_poles_per_loop": float(np.sum(exact_poles)) / (2 * len(patches)),
         "approx_curve_poles_per_loop": float(np.mean(approx_poles)),
-        "shape_s_exact_curves": t_shape, "shape_s_approx_curves": t_approx,
+        "shape_s": t_shape, "shape_s_occ_build_curves3d": t_approx,
         "repeats": args.repeats, "torch_threads": 1, "ablation": ablation_rows,
         "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0], "cpu_count": os.cpu_count(),
     }
@@ -336,13 +457,14 @@ def main(argv=None) -> int:
              f"The previous session's writer on the quiet machine: {BEFORE}. "
              f"Trimming loops cut into edges of {shapes.EDGE_SEGMENTS} segments; ablation (STEP, CPU s): {abl}. "
              f"3-D trimming curves: polynomial of degree {shapes.APPROX_DEGREE} within the edge tolerance "
-             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm): "
+             f"({shapes.CURVE_TOLERANCE:g} of the patch diagonal, at least {shapes.TOLERANCE:g} mm, "
+             f"at most {shapes.CURVE_TOLERANCE_MAX:g} mm): "
              f"{approx_per_loop:.0f} poles per loop against {exact_per_loop:.0f} for the exact rational curves of "
              f"degree 6; largest deviation from S(pcurve(t)) at 2,001 parameters per loop: {deviation:.2f} of the "
              f"tolerance. Written: {meta['written_curve_poles_per_loop']:.0f} poles per loop (over its edges). "
              f"`exact curves` columns: shape + write + check with the exact curves (the previous writer), same run. "
              f"OCC's approximation (BuildCurves3d): {meta['approx_curve_poles_per_loop']:.0f} "
-             f"poles per loop, {t_approx:.2f} s wall against {t_shape:.2f} s for the exact ones. `max_error_rel`: "
+             f"poles per loop, {t_approx:.2f} s wall to build against {t_shape:.2f} s for nurbskit's. `max_error_rel`: "
              "largest |S_back - S| on an 11 x 11 grid per patch over the patch's diagonal. Peer: OCC's own writer on "
              "the same shape (STEP/IGES with 12/9 digits). "
              f"Load average (1 min) {meta['load_average_1min_start']:.1f} at the start and "
@@ -361,6 +483,36 @@ def main(argv=None) -> int:
                ("file_mb", "MB"), ("occ_default_file_mb", "OCC default MB"), ("max_error_rel", "max error / diag")]
     path = write_results("cad", rows, columns, meta=meta, title="CAD exchange: 100 trimmed patches", notes=notes)
     print(path.read_text())
+    stage_columns = [("written_s", "written (s, wall)"), ("written_cpu_s", "written CPU (s)"),
+                     ("shape_cpu_s", "shape CPU"), ("write_cpu_s", "write CPU"), ("read_back_cpu_s", "read back CPU"),
+                     ("analyzer_cpu_s", "analyzer CPU"), ("file_mb", "MB"), ("poles_per_loop", "poles per loop"),
+                     ("edges", "edges"), ("valid", "valid")]
+    load = f"Load average (1 min) {load_start:.1f} at the start of the benchmark, {os.getloadavg()[0]:.1f} now."
+    path = write_results(
+        "cad_curves", sweep_rows,
+        [("degree", "degree"), ("curve_tolerance_rel", "3-D curve tolerance / diagonal")] + stage_columns
+        + [("deviation_over_tolerance_20_patches", "largest deviation / tolerance")],
+        meta={"patches": len(patches), "rounds": 2, "edge_segments": shapes.EDGE_SEGMENTS,
+              "default": [shapes.APPROX_DEGREE, shapes.CURVE_TOLERANCE]},
+        title="CAD exchange: the 3-D trimming curves' tolerance (STEP, 100 trimmed patches)",
+        notes="STEP written = shape + write + read back (no healing) + BRepCheck_Analyzer (parallel; its CPU seconds "
+              "are both threads'), per degree and tolerance of the 3-D trimming curves relative to the patch diagonal "
+              f"(`shapes.APPROX_DEGREE`, `shapes.CURVE_TOLERANCE`; default {shapes.APPROX_DEGREE} and "
+              f"{shapes.CURVE_TOLERANCE:g}); two interleaved rounds after a warm-up, "
+              "the smallest CPU seconds of each stage. Largest deviation of the 3-D curves from S(pcurve(t)) at 2,001 "
+              f"parameters per loop on the first 20 patches. {load}")
+    print(path.read_text())
+    if args.baseline:
+        base = baseline_runs(args.baseline, args.rounds, args.repeats, len(patches))
+        path = write_results(
+            "cad_baseline", base, [("writer", "writer"), ("format", "format")] + stage_columns,
+            meta={"baseline": args.baseline, "rounds": args.rounds, "repeats": args.repeats},
+            title=f"CAD exchange: before ({args.baseline}) and after, alternating processes",
+            notes=f"The writer of commit {args.baseline} and this one, each in its own process (`--stages-only`), "
+                  f"alternating {args.rounds} times, {args.repeats} runs each after a warm-up; per writer, format and "
+                  "stage the smallest CPU seconds over all runs (the least disturbed), written = shape + write + "
+                  f"read back + analyzer (CPU of both analyzer threads; wall: the smallest run). {load}")
+        print(path.read_text())
     return 0
 
 

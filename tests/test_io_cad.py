@@ -264,6 +264,64 @@ def test_approximated_trimming_curves_stay_within_their_tolerance(degrees, ratio
     assert_close(_occ_points(geom, params), s.evaluate(torch.tensor(closed)).numpy(), atol=1e-12 * diagonal(s))
 
 
+def _circle_loop(s, count=37, radius=0.4, centre=(0.5, 0.5)):
+    """A wavy closed (u, v) polyline in ``s``'s domain, closed (first point again), and its chord parameters."""
+    (u0, u1), (v0, v1) = s.domain
+    th = np.linspace(0, 2 * np.pi, count, endpoint=False)
+    r = radius + 0.05 * np.sin(3 * th)
+    uv = np.stack([u0 + (centre[0] + r * np.cos(th)) * (u1 - u0), v0 + (centre[1] + r * np.sin(th)) * (v1 - v0)], 1)
+    closed = np.vstack([uv, uv[:1]])
+    return closed, shapes._chord_parameters(closed)
+
+
+def test_trimming_curves_of_many_surfaces_in_one_batch_are_each_surfaces_own():
+    """``approximate_trim_curves`` evaluates every surface of the same degrees and grid
+    size in one batch: the curves must be those of each surface approximated alone
+    (bit for bit), whatever the knot vectors (clamped, unclamped), sizes and degrees."""
+    rng = np.random.default_rng(21)
+    surfaces = []
+    for degrees, kinds in [((3, 3), ("clamped", "clamped"))] * 3 + [((3, 3), ("unclamped", "clamped")),
+                                                                    ((2, 3), ("clamped", "unclamped"))]:
+        while True:  # three of the same grid size, with different knots
+            s = random_surface(rng, degrees, kinds, scale=20.0)
+            if len(surfaces) >= 3 or s.sizes == (surfaces[0].sizes if surfaces else s.sizes):
+                break
+        surfaces.append(s)
+    assert surfaces[0].sizes == surfaces[1].sizes == surfaces[2].sizes
+    jobs = []
+    for k, s in enumerate(surfaces):
+        loops = [_circle_loop(s, 29 + k), _circle_loop(s, 13, radius=0.12, centre=(0.45, 0.5))]
+        jobs.append((s, loops, shapes.CURVE_TOLERANCE * diagonal(s)))
+    together = shapes.approximate_trim_curves(jobs)
+    for job, curves in zip(jobs, together):
+        alone = shapes.approximate_loop_curves_3d(*job)
+        assert len(curves) == len(alone) == 2
+        for a, b in zip(curves, alone):
+            assert a[3] == b[3]
+            assert_close(a[0], b[0], atol=0)
+            assert_close(a[2], b[2], atol=0)
+        for (closed, params), curve in zip(job[1], curves):
+            assert _dense_deviation(job[0], closed, params, curve) <= job[2]
+
+
+def test_trimming_curve_across_a_crease_keeps_a_corner_there():
+    """A bicubic surface with a triple knot (C0: a crease) in u: the polyline's segments
+    are cut where they cross it, so the polynomial curve follows the crease within the
+    tolerance instead of falling back to the exact curve."""
+    x, y = np.meshgrid(np.linspace(0, 30, 7), np.linspace(0, 30, 5), indexing="ij")
+    z = np.abs(x - 15.0) * 0.8  # a ridge along the crease line u = 0.5
+    cp = np.stack([x, y, z], axis=-1)
+    ku = torch.tensor([0, 0, 0, 0, 0.5, 0.5, 0.5, 1, 1, 1, 1], dtype=torch.float64)
+    kv = torch.tensor([0, 0, 0, 0, 0.5, 1, 1, 1, 1], dtype=torch.float64)
+    s = nurbskit.NURBSSurface(torch.tensor(cp), (3, 3), [ku, kv], torch.tensor(np.ones((7, 5)) + 0.1 * (y > 10)))
+    assert [len(k) for k in shapes._crease_knots(s)] == [1, 0]
+    closed, params = _circle_loop(s, 23)
+    tolerance = shapes.CURVE_TOLERANCE * diagonal(s)
+    curve = shapes.approximate_loop_curves_3d(s, [(closed, params)], tolerance)[0]
+    assert curve[3] == shapes.APPROX_DEGREE and curve[1] is None  # approximated, not the exact fallback
+    assert _dense_deviation(s, closed, params, curve) <= tolerance
+
+
 def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monkeypatch):
     """Each trimming edge's tolerance is the one its 3-D curve was fitted to, the written
     file passes the check with it, and the exact curves (``EXACT_CURVES``) are still
@@ -285,6 +343,7 @@ def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monk
     hole = TrimLoop(centre + 0.2 * size * circle, "hole")
     patch = TrimmedSurface(s, [outer, hole])
     expected = max(shapes.TOLERANCE, shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0))
+    assert expected == shapes.edge_tolerance(s) < shapes.CURVE_TOLERANCE_MAX
 
     def edges(face):
         exp, found = TopExp_Explorer(face, TopAbs_EDGE), []
@@ -301,6 +360,22 @@ def test_written_trimming_edges_carry_the_approximation_tolerance(tmp_path, monk
     monkeypatch.setattr(shapes, "EXACT_CURVES", True)
     assert set(edges(shapes.face_of(patch))[:, 1]) == {6}
     assert cad.write_cad(patch, tmp_path / "exact.step")["valid"]
+
+
+def test_edge_tolerance_is_relative_within_its_bounds():
+    """The trimming edges' tolerance is CURVE_TOLERANCE of the surface's diagonal, never
+    coarser than CURVE_TOLERANCE_MAX (0.001 mm) nor finer than TOLERANCE; a 20 m surface
+    gets the cap and its curves stay within it."""
+    rng = np.random.default_rng(8)
+    for scale in (1e-4, 1.0, 30.0, 2e4):
+        s = random_surface(rng, (3, 3), scale=scale)
+        relative = shapes.CURVE_TOLERANCE * max(diagonal(s), 1.0)
+        expected = min(max(relative, shapes.TOLERANCE), shapes.CURVE_TOLERANCE_MAX)
+        assert shapes.edge_tolerance(s) == expected
+    assert shapes.edge_tolerance(s) == shapes.CURVE_TOLERANCE_MAX  # the 20 m one
+    closed, params = _circle_loop(s, 31)
+    curve = shapes.approximate_loop_curves_3d(s, [(closed, params)], shapes.edge_tolerance(s))[0]
+    assert _dense_deviation(s, closed, params, curve) <= shapes.CURVE_TOLERANCE_MAX
 
 
 def test_a_loop_outside_the_domain_is_refused():

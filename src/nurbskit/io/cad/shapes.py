@@ -8,11 +8,11 @@ Convention:
     the surface is its piece of the polyline (a degree-1 ``Geom2d_BSplineCurve``,
     parameter = cumulative chord length in (u, v) along the loop: the exact trim), and
     its 3-D curve is its piece of a polynomial approximation of the polyline's image
-    within the edge's tolerance (``CURVE_TOLERANCE`` of the surface's size, which the
-    edge carries; :func:`approximate_loop_curves_3d`). The exact image is rational of
-    degree ``p + q`` (:func:`loop_curve_3d`: along a straight (u, v) segment the surface
-    point is a polynomial of degree ``p + q`` in homogeneous coordinates within a knot
-    span), written where it is smaller or with ``EXACT_CURVES``.
+    within the edge's tolerance (:func:`edge_tolerance`: ``CURVE_TOLERANCE`` of the
+    surface's size, at most 0.001 mm, which the edge carries; :func:`approximate_trim_curves`).
+    The exact image is rational of degree ``p + q`` (:func:`loop_curve_3d`: along a
+    straight (u, v) segment the surface point is a polynomial of degree ``p + q`` in
+    homogeneous coordinates within a knot span), written where it is smaller or with ``EXACT_CURVES``.
     A :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` becomes a
     face on OCC's surface of revolution / extrusion over its parameter bounds. The outer loop runs
     counter-clockwise and holes clockwise, as OCC expects for a forward face, so the
@@ -46,8 +46,14 @@ from .occ import as_bspline_surface, curve_from_occ, curve_to_occ, ocp, surface_
 TOLERANCE = 1e-7
 #: tolerance of the edges on trimming loops, relative to the surface's size (the diagonal
 #: of its control points, at least 1): their 3-D curves lie within it of the exact image
-#: of the pcurve (:func:`approximate_loop_curves_3d`); 1e-7 of a 15 mm patch is 1.5 nm
-CURVE_TOLERANCE = 1e-7
+#: of the pcurve (:func:`approximate_loop_curves_3d`); the pcurves stay exact. 1e-5 of a
+#: 15 mm patch is 0.15 um, of a 100 mm patch 1 um, the 0.001 mm CAD systems model to;
+#: never coarser than ``CURVE_TOLERANCE_MAX`` nor finer than ``TOLERANCE`` (OCC's
+#: Precision::Confusion). Poles per loop of benchmarks/bench_cad.py's patches and what
+#: writing and checking them costs, per tolerance and degree: docs/cad.md
+CURVE_TOLERANCE = 1e-5
+#: the largest edge tolerance of a trimming loop, model units (mm): 0.001 mm
+CURVE_TOLERANCE_MAX = 1e-3
 #: True: the 3-D curves of trimming loops are the exact rational images (:func:`loop_curves_3d`,
 #: degree p + q) instead of approximations within the edge's tolerance
 EXACT_CURVES = False
@@ -211,8 +217,11 @@ def _exact_pieces(surface, loops: list[tuple[np.ndarray, np.ndarray]]) -> list[t
     return out
 
 
-#: degree of the approximated 3-D trimming curves (:func:`approximate_loop_curves_3d`)
-APPROX_DEGREE = 4
+#: degree of the approximated 3-D trimming curves (:func:`approximate_loop_curves_3d`);
+#: cubic: 151 poles per loop of the benchmark's patches at 1e-5 against 193 for degree 4
+#: (a segment between two of the loop's points needs ``degree`` poles however loose the
+#: tolerance), 243 against 220 at 1e-6
+APPROX_DEGREE = 3
 #: an approximated piece is accepted when its largest deviation at its check points is
 #: within this fraction of the edge's tolerance (the rest is margin for the deviation
 #: between check points; tests/test_io_cad.py measures it densely)
@@ -225,90 +234,210 @@ APPROX_MAX_HALVINGS = 10
 def approximate_loop_curves_3d(surface, loops: list[tuple[np.ndarray, np.ndarray]], tolerance: float) -> list[tuple]:
     """3-D images of closed (u, v) polylines on ``surface`` as polynomial (non-rational)
     B-splines of degree :data:`APPROX_DEGREE` within ``tolerance`` (model units) of the
-    exact image ``S(u(t), v(t))``.
-
-    Why: the exact image (:func:`loop_curves_3d`) is rational of degree ``p + q`` with
-    ``p + q`` poles per piece; for bicubic patches it was three quarters of a STEP file,
-    and writing, reading back and checking it most of the time of ``write_cad``. CAD
-    systems keep a 3-D edge curve within the edge's tolerance of the curve on the surface
-    (the pcurve, which stays the exact trim); ``face_of`` gives the edge that tolerance,
-    and ``BRepCheck_Analyzer`` (the check after writing) verifies it.
-
-    Method: the exact image, piece by piece (:func:`_exact_pieces`: rational Bezier
-    pieces between the loop's points and its crossings of the knot lines), is
-    interpolated on each piece at ``APPROX_DEGREE + 1`` Chebyshev-Lobatto nodes in the
-    Bernstein basis (the ends exactly); its deviation from the exact piece is measured
-    half-way between the nodes (where an interpolant strays most) and at the quarter
-    points, and a piece deviating more than ``APPROX_MARGIN * tolerance`` is halved and
-    tried again. Evaluating the exact Bezier pieces costs no surface evaluation. Pieces
-    join with C0 knots; the parameter is the polyline's (``params``), so the 3-D curve and
-    the pcurve are the same curve on the surface within ``tolerance``.
+    exact image ``S(u(t), v(t))``: :func:`approximate_trim_curves` for one surface.
 
     Args:
         loops: ``(uv (L + 1, 2), params (L + 1,))`` per loop, as :func:`loop_curves_3d`.
         tolerance: the largest deviation allowed, model units.
 
     Returns:
-        Per loop ``(poles (M, 3), None, flat knots, degree)``; the exact curves of
-        :func:`loop_curves_3d` where the exact image is already polynomial of degree
+        Per loop ``(poles (M, 3), None, flat knots, degree)``, or the exact curves of
+        :func:`loop_curves_3d` (see :func:`approximate_trim_curves`).
+    """
+    return approximate_trim_curves([(surface, loops, tolerance)])[0]
+
+
+def approximate_trim_curves(jobs: list[tuple]) -> list[list[tuple]]:
+    """The 3-D curves of the trimming loops of many surfaces at once: per job
+    ``(surface, loops, tolerance)`` the curves of :func:`approximate_loop_curves_3d`.
+
+    Why approximate: the exact image (:func:`loop_curves_3d`) is rational of degree
+    ``p + q`` with ``p + q`` poles per piece; for bicubic patches it was three quarters of
+    a STEP file, and writing, reading back and checking it most of the time of
+    ``write_cad``. CAD systems keep a 3-D edge curve within the edge's tolerance of the
+    curve on the surface (the pcurve, which stays the exact trim); ``face_of`` gives the
+    edge that tolerance, and ``BRepCheck_Analyzer`` (the check after writing) verifies it.
+
+    Method: only the loop's points are corners of the image: across a knot line of a C1
+    (or smoother) surface it stays C1. So each segment of the polyline (cut only where it
+    crosses a knot line of multiplicity >= the degree, a possible crease) is interpolated
+    at ``APPROX_DEGREE + 1`` Chebyshev-Lobatto nodes in the Bernstein basis (the ends
+    exactly), its deviation from the surface measured half-way between the nodes (where
+    an interpolant strays most) and at the quarter points, and a sub-piece deviating more
+    than ``APPROX_MARGIN * tolerance`` is halved and tried again. Sub-pieces join with C0
+    knots; the parameter is the polyline's (``params``), so the 3-D curve and the pcurve
+    are the same curve on the surface within ``tolerance``. Each round evaluates the
+    surfaces at every node and check point of every surface of the same degrees and
+    control-grid size in one batch (nurbskit's basis functions with one knot vector per
+    surface, then one contraction with the homogeneous control nets): building the
+    faces of 100 patches spent most of its time in per-surface NumPy calls before.
+    Starting from the segments rather than the exact Bezier pieces (between the points
+    and every knot-line crossing) gave, at degree 4, 220 instead of 282 poles per loop on
+    benchmarks/bench_cad.py's patches at 1e-6 of their diagonal (312 against 326 at 1e-7).
+
+    Returns:
+        Per job, per loop ``(poles (M, 3), None, flat knots, degree)``; the exact curves
+        of :func:`loop_curves_3d` where the exact image is already polynomial of degree
         ``<= APPROX_DEGREE`` (a non-rational surface with ``p + q`` that low), where the
         approximation needs more poles than the exact curves (a strongly curved surface
         with few knots), or where a piece still deviates after ``APPROX_MAX_HALVINGS``
         halvings.
     """
     k = APPROX_DEGREE
-    d = sum(surface.degrees)
-    if d <= k and not surface.is_rational:
-        return loop_curves_3d(surface, loops)
-    exact = _exact_pieces(surface, loops)
+    out: list = [None] * len(jobs)
+    groups: dict = {}
+    for index, (surface, loops, _) in enumerate(jobs):
+        if sum(surface.degrees) <= k and not surface.is_rational:
+            out[index] = loop_curves_3d(surface, loops)
+        else:
+            groups.setdefault((tuple(surface.degrees), tuple(surface.sizes)), []).append(index)
+    for members in groups.values():
+        for index, curves in zip(members, _approximate_group([jobs[i] for i in members])):
+            out[index] = curves if curves is not None else loop_curves_3d(jobs[index][0], jobs[index][1])
+    return out
+
+
+def _approximate_group(jobs: list[tuple]) -> list:
+    """:func:`approximate_trim_curves` for surfaces of the same degrees and control-grid
+    size (one batched evaluation per round); None for a job that falls back to the exact
+    curves."""
+    k = APPROX_DEGREE
     tau, inverse = _bernstein_inverse(k)
     checks = np.unique(np.concatenate([0.5 * (tau[1:] + tau[:-1]), [0.25, 0.75]]))
     local = np.concatenate([tau, checks])  # where a sub-piece is evaluated, in [0, 1]
     check_basis = _bernstein_matrix(k, checks)  # (C, k + 1)
-    coeff = np.concatenate([c for _, _, c in exact])  # (P, d + 1, 4)
-    which = np.concatenate([np.full(len(c), i) for i, (_, _, c) in enumerate(exact)])
-    sa, sb = np.concatenate([e[0] for e in exact]), np.concatenate([e[1] for e in exact])
-    piece = np.arange(len(coeff))  # the exact piece a sub-piece lies on
-    lo, hi = np.zeros(len(coeff)), np.ones(len(coeff))  # the sub-piece, in the piece's [0, 1]
-    done = []  # accepted sub-pieces: (loop, s_start, s_end, poles (P, k + 1, 3))
-    first = True
+    evaluate = _BatchEvaluator([surface for surface, _, _ in jobs])
+    d = sum(jobs[0][0].degrees)
+    # the first sub-pieces ("bases"): the polyline's segments, cut where they cross a crease
+    face, loop, p0, p1, s0, s1, exact_poles = [], [], [], [], [], [], []
+    for f, (surface, loops, _) in enumerate(jobs):
+        corners = _crease_knots(surface)
+        knots = [np.unique(kv.detach().cpu().double().numpy()) for kv in surface.knot_vectors]
+        count = 0
+        for i, (uv, params) in enumerate(loops):
+            if len(corners[0]) or len(corners[1]):
+                a, b, sa, sb = _loop_pieces(uv, params, corners)
+            else:
+                a, b, sa, sb = uv[:-1], uv[1:], params[:-1], params[1:]
+            face.append(np.full(len(a), f))
+            loop.append(np.full(len(a), i))
+            p0.append(a), p1.append(b), s0.append(sa), s1.append(sb)
+            # the exact curves' pieces: a segment's crossings of the knot lines, counted
+            crossings = sum(np.abs(np.searchsorted(kv, uv[1:, axis]) - np.searchsorted(kv, uv[:-1, axis])).sum()
+                            for axis, kv in enumerate(knots))
+            count += (len(uv) - 1 + crossings) * d
+        exact_poles.append(count)
+    face, loop = np.concatenate(face), np.concatenate(loop)
+    p0, p1, s0, s1 = (np.concatenate(x) for x in (p0, p1, s0, s1))
+    base = np.arange(len(face))  # the base a sub-piece lies on
+    lo, hi = s0.copy(), s1.copy()
+    tolerance = np.array([t for _, _, t in jobs])
+    done = []  # accepted sub-pieces: (base, s_start, s_end, poles (P, k + 1, 3))
     for _ in range(APPROX_MAX_HALVINGS + 1):
-        if first:  # whole pieces: one Bernstein matrix for all
-            h = _bernstein_matrix(d, local) @ coeff  # (m, n, 4)
-            first = False
-        else:
-            t = lo[:, None] + local[None, :] * (hi - lo)[:, None]  # (m, n)
-            h = _bernstein_matrix(d, t) @ coeff[piece]  # (m, n, 4)
-        xyz = h[..., :3] / h[..., 3:]
+        s = lo[:, None] + local[None, :] * (hi - lo)[:, None]  # (m, n)
+        s[:, 0], s[:, k] = lo, hi  # the ends exactly
+        f = (s - s0[base, None]) / (s1 - s0)[base, None]  # along the base: 0 and 1 at its ends exactly
+        uv = (1 - f)[..., None] * p0[base, None] + f[..., None] * p1[base, None]
+        xyz = evaluate(np.repeat(face[base], len(local)), uv.reshape(-1, 2)).reshape(len(base), len(local), 3)
         poles = inverse @ xyz[:, :k + 1]  # (m, k + 1, 3)
         poles[:, 0], poles[:, -1] = xyz[:, 0], xyz[:, k]  # the ends interpolate exactly
         error = np.linalg.norm(check_basis @ poles - xyz[:, k + 1:], axis=-1).max(axis=1)
-        good = error <= APPROX_MARGIN * tolerance
-        a, b = sa[piece[good]], sb[piece[good]]
-        s_lo = np.where(lo[good] == 0, a, a + lo[good] * (b - a))  # piece ends: exactly
-        s_hi = np.where(hi[good] == 1, b, a + hi[good] * (b - a))
-        done.append((which[piece[good]], s_lo, s_hi, poles[good]))
+        good = error <= APPROX_MARGIN * tolerance[face[base]]
+        done.append((base[good], lo[good], hi[good], poles[good]))
         bad = ~good
         if not bad.any():
             break
         mid = 0.5 * (lo[bad] + hi[bad])
-        piece = np.concatenate([piece[bad], piece[bad]])
+        base = np.concatenate([base[bad], base[bad]])
         lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
-    else:
-        return loop_curves_3d(surface, loops)  # a piece the approximation does not reach: exact
-    loop, s_lo, s_hi, poles = (np.concatenate(parts) for parts in zip(*done))
-    if len(loop) * k > len(coeff) * d:  # more poles than the exact curves (weights aside): those
-        return loop_curves_3d(surface, loops)
-    order = np.lexsort((s_lo, loop))
-    loop, s_lo, s_hi, poles = loop[order], s_lo[order], s_hi[order], poles[order]
+    failed = set(face[base].tolist()) if bad.any() else set()  # pieces the approximation does not reach
+    base, s_lo, s_hi, poles = (np.concatenate(parts) for parts in zip(*done))
+    order = np.lexsort((s_lo, loop[base], face[base]))
+    base, s_lo, s_hi, poles = base[order], s_lo[order], s_hi[order], poles[order]
+    sub_face, sub_loop = face[base], loop[base]
+    bounds = np.searchsorted(sub_face, np.arange(len(jobs) + 1))
     out = []
-    for index in range(len(loops)):
-        sel = loop == index
-        starts, ends, own = s_lo[sel], s_hi[sel], poles[sel]
-        # each sub-piece's poles but its last (the next one's first); closed: the first again
-        merged = np.concatenate([own[:, :-1].reshape(-1, 3), own[0, :1]])
-        flat = np.concatenate([[starts[0]] * (k + 1), np.repeat(starts[1:], k), [ends[-1]] * (k + 1)])
-        out.append((merged, None, flat, k))
+    for f, (_, loops, _) in enumerate(jobs):
+        a, b = bounds[f], bounds[f + 1]
+        if f in failed or (b - a) * k > exact_poles[f]:  # more poles than the exact curves (weights aside)
+            out.append(None)
+            continue
+        curves = []
+        cuts = a + np.searchsorted(sub_loop[a:b], np.arange(len(loops) + 1))
+        for i in range(len(loops)):
+            starts, ends, own = s_lo[cuts[i]:cuts[i + 1]], s_hi[cuts[i]:cuts[i + 1]], poles[cuts[i]:cuts[i + 1]]
+            # each sub-piece's poles but its last (the next one's first); closed: the first again
+            merged = np.concatenate([own[:, :-1].reshape(-1, 3), own[0, :1]])
+            flat = np.concatenate([[starts[0]] * (k + 1), np.repeat(starts[1:], k), [ends[-1]] * (k + 1)])
+            curves.append((merged, None, flat, k))
+        out.append(curves)
+    return out
+
+
+class _BatchEvaluator:
+    """Points of several surfaces of the same degrees and control-grid size: called with
+    ``face (N,)`` (which surface) and ``uv (N, 2)``, returns ``S_face(uv) (N, 3)``.
+
+    The non-zero basis functions (The NURBS Book A2.2) come from nurbskit's
+    :func:`~nurbskit.core.basis.basis_functions`: with the one knot vector of a direction
+    where every surface has the same (patches of one fit usually do), else with one knot
+    vector per surface (the points padded to the same count per surface); the sum over
+    the ``(p + 1) x (q + 1)`` control points (A3.5 for the homogeneous net, then the
+    division by the weight) from one gather and one contraction in NumPy."""
+
+    def __init__(self, surfaces):
+        self.degrees = tuple(surfaces[0].degrees)
+        self.sizes = tuple(surfaces[0].sizes)
+        self.knots = []  # per direction (m,) shared or (F, m)
+        for axis in (0, 1):
+            knots = torch.stack([s.knot_vectors[axis].detach().cpu().double() for s in surfaces])
+            self.knots.append(knots[0] if bool((knots == knots[:1]).all()) else knots)
+        self.count = len(surfaces)
+        self.net = np.stack([_homogeneous_net(s) for s in surfaces]).reshape(-1, 4)  # (F * nu * nv, 4)
+
+    def __call__(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        from ...core.basis import basis_functions
+        from ...core.knots import find_spans
+
+        slot = width = None
+        index, values = [], []
+        for axis, (degree, size) in enumerate(zip(self.degrees, self.sizes)):
+            knots = self.knots[axis]
+            if knots.ndim == 1:  # one knot vector for all
+                u = torch.from_numpy(np.ascontiguousarray(uv[:, axis]))
+                spans = find_spans(knots, degree, size, u)
+                values.append(basis_functions(knots, degree, spans, u).numpy())  # (N, p + 1)
+                index.append(spans.numpy()[:, None] - degree + np.arange(degree + 1))
+                continue
+            if slot is None:  # each point's place in its surface's row of the padded (F, width) layout
+                per_face = np.bincount(face, minlength=self.count)
+                rank = np.empty(len(face), dtype=np.int64)
+                rank[np.argsort(face, kind="stable")] = (np.arange(len(face))
+                                                         - np.repeat(np.cumsum(per_face) - per_face, per_face))
+                width = int(per_face.max())
+                slot = face * width + rank
+            padded = knots[:, degree:degree + 1].numpy().repeat(width, axis=1)  # the domain's start
+            padded.reshape(-1)[slot] = uv[:, axis]
+            u = torch.from_numpy(padded)
+            spans = find_spans(knots, degree, size, u)
+            basis = basis_functions(knots, degree, spans, u)  # (F, width, p + 1)
+            values.append(np.take(basis.numpy().reshape(-1, degree + 1), slot, axis=0))
+            index.append(np.take(spans.numpy().reshape(-1), slot)[:, None] - degree + np.arange(degree + 1))
+        nu, nv = self.sizes
+        flat = (face[:, None, None] * (nu * nv) + index[0][:, :, None] * nv + index[1][:, None, :])
+        block = np.take(self.net, flat, axis=0)  # (N, p + 1, q + 1, 4); take: 4x faster than [flat]
+        weights = values[0][:, :, None] * values[1][:, None, :]
+        h = np.matmul(weights.reshape(len(face), 1, -1), block.reshape(len(face), -1, 4))[:, 0]  # (N, 4)
+        return h[:, :3] / h[:, 3:]
+
+
+def _crease_knots(surface) -> list[np.ndarray]:
+    """Per direction, the distinct knots inside the domain where the surface is only C0
+    (multiplicity >= the degree)."""
+    out = []
+    for kv, degree, (lo, hi) in zip(surface.knot_vectors, surface.degrees, surface.domain):
+        values, counts = np.unique(kv.detach().cpu().double().numpy(), return_counts=True)
+        out.append(values[(counts >= degree) & (values > lo) & (values < hi)])
     return out
 
 
@@ -458,8 +587,12 @@ def _loop_wire(uv: np.ndarray, t: np.ndarray, curve_3d: tuple, surface_geom, tol
     return wire
 
 
-def face_of(obj, tolerance: float = TOLERANCE):
-    """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops)."""
+def face_of(obj, tolerance: float = TOLERANCE, *, prepared: tuple | None = None):
+    """A ``TopoDS_Face`` for a NURBSSurface (natural bounds) or a TrimmedSurface (its loops).
+
+    ``prepared``: ``(closed loops, their parameters, edge tolerance, 3-D curves)`` of a
+    TrimmedSurface, as ``to_shape`` computes them for all its surfaces at once
+    (:func:`_trim_job`, :func:`approximate_trim_curves`); default: computed here."""
     ocp()
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
 
@@ -470,21 +603,11 @@ def face_of(obj, tolerance: float = TOLERANCE):
         if not maker.IsDone():
             raise NurbskitError(f"OpenCASCADE could not make a face from this surface (error {maker.Error()})")
         return maker.Face()
-    (u0, u1), (v0, v1) = trimmed.surface.domain
-    for loop in trimmed.loops:
-        lo, hi = loop.uv.min(axis=0), loop.uv.max(axis=0)
-        slack = 1e-9 * max(u1 - u0, v1 - v0)
-        if lo[0] < u0 - slack or hi[0] > u1 + slack or lo[1] < v0 - slack or hi[1] > v1 + slack:
-            raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
-                              f"(loop bounds {lo.tolist()} to {hi.tolist()})")
-    size = max(_surface_size(trimmed.surface), 1.0)
-    closed = [np.vstack([loop.uv, loop.uv[:1]]) for loop in trimmed.loops]  # the first point again at the end
-    params = [_chord_parameters(uv) for uv in closed]
-    edge_tolerance = max(tolerance, CURVE_TOLERANCE * size)
-    if EXACT_CURVES:
-        curves = loop_curves_3d(trimmed.surface, list(zip(closed, params)))
+    if prepared is None:
+        closed, params, edge_tolerance = _trim_job(trimmed, tolerance)
+        curves = _trim_curves([(trimmed.surface, list(zip(closed, params)), edge_tolerance)])[0]
     else:
-        curves = approximate_loop_curves_3d(trimmed.surface, list(zip(closed, params)), edge_tolerance)
+        closed, params, edge_tolerance, curves = prepared
     wires = [_loop_wire(uv, t, c, geom, edge_tolerance) for uv, t, c in zip(closed, params, curves)]
     outer = wires[0] if trimmed.outer is not None else None
     if outer is None:  # holes only: the natural boundary is the outer loop
@@ -501,6 +624,37 @@ def face_of(obj, tolerance: float = TOLERANCE):
     # holes clockwise, which is what OCC expects, and the check after writing (its
     # BRepCheck_Face::OrientationOfWires) refuses a file where that went wrong
     return maker.Face()
+
+
+def _trim_job(trimmed: TrimmedSurface, tolerance: float) -> tuple[list, list, float]:
+    """A trimmed surface's loops closed (the first point again at the end) ``(L + 1, 2)``,
+    their chord parameters, and its edges' tolerance; a loop outside the domain is an
+    OptionError."""
+    (u0, u1), (v0, v1) = trimmed.surface.domain
+    for loop in trimmed.loops:
+        lo, hi = loop.uv.min(axis=0), loop.uv.max(axis=0)
+        slack = 1e-9 * max(u1 - u0, v1 - v0)
+        if lo[0] < u0 - slack or hi[0] > u1 + slack or lo[1] < v0 - slack or hi[1] > v1 + slack:
+            raise OptionError(f"a trimming loop leaves the surface's domain [{u0}, {u1}] x [{v0}, {v1}] "
+                              f"(loop bounds {lo.tolist()} to {hi.tolist()})")
+    closed = [np.vstack([loop.uv, loop.uv[:1]]) for loop in trimmed.loops]
+    params = [_chord_parameters(uv) for uv in closed]
+    return closed, params, edge_tolerance(trimmed.surface, tolerance)
+
+
+def edge_tolerance(surface, tolerance: float = TOLERANCE) -> float:
+    """The tolerance of a trimming edge on ``surface`` (model units): ``CURVE_TOLERANCE``
+    of its size (the diagonal of its control points, at least 1), within
+    ``[tolerance, CURVE_TOLERANCE_MAX]``."""
+    return max(tolerance, min(CURVE_TOLERANCE * max(_surface_size(surface), 1.0), CURVE_TOLERANCE_MAX))
+
+
+def _trim_curves(jobs: list[tuple]) -> list[list[tuple]]:
+    """The loops' 3-D curves for ``(surface, loops, edge tolerance)`` jobs: approximated
+    (:func:`approximate_trim_curves`), or exact with ``EXACT_CURVES``."""
+    if EXACT_CURVES:
+        return [loop_curves_3d(surface, loops) for surface, loops, _ in jobs]
+    return approximate_trim_curves(jobs)
 
 
 def _surface_size(surface) -> float:
@@ -609,8 +763,14 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
     from OCP.TopoDS import TopoDS_Compound
 
     items = list(obj) if isinstance(obj, (list, tuple)) and not _is_mesh_tuple(obj) else [obj]
+    # the trimming loops' 3-D curves of every trimmed surface at once (one batch per round)
+    trimmed = [i for i, item in enumerate(items) if isinstance(item, TrimmedSurface) and item.loops]
+    prepared = [_trim_job(items[i], tolerance) for i in trimmed]
+    curves = _trim_curves([(items[i].surface, list(zip(closed, params)), edge_tolerance)
+                           for i, (closed, params, edge_tolerance) in zip(trimmed, prepared)])
+    prepared = {i: (*job, c) for i, job, c in zip(trimmed, prepared, curves)}
     shapes, faces = [], []
-    for item in items:
+    for index, item in enumerate(items):
         if _is_mesh_tuple(item):
             shapes.append(mesh_solid(*item, tolerance=tolerance))
         elif _is_mesh(item):
@@ -618,7 +778,7 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
         elif is_swept(item):
             faces.append(swept_face(item, tolerance) if analytic else face_of(item.to_nurbs(), tolerance))
         elif isinstance(item, TrimmedSurface) or getattr(item, "kind", None) == "surface":
-            faces.append(face_of(item, tolerance))
+            faces.append(face_of(item, tolerance, prepared=prepared.get(index)))
         elif getattr(item, "kind", None) == "curve":
             shapes.append(edge_of(item))
         elif getattr(item, "kind", None) == "volume":
