@@ -45,6 +45,10 @@ class PatchFit:
     topology: Topology = Topology()
 
 
+#: Newton's stopping step in :func:`point_distances`, relative to the control net's size.
+FOOT_TOL = 1e-8
+
+
 def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = False, *,
                     start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Foot-point parameters ``(M, 2)`` and true distances ``(M,)`` of ``points (M, 3)``.
@@ -54,13 +58,22 @@ def point_distances(surface: NURBSSurface, points: np.ndarray, closed_v: bool = 
     point lies just across the seam does not stop on it. ``start (M, 2)``: warm-start
     parameters (e.g. a nearby point's foot point): Newton starts there instead of at the
     samples of a grid.
+
+    Newton stops once a step moves the foot point by less than ``FOOT_TOL`` times the
+    size of the control net, and convergence is checked after every iteration (on the CPU
+    a check is one cheap host read, and it drops the converged points from the work): the
+    distances differ from the core's default (``eps ** 0.75``, checked every 4) by about
+    1e-14 of the patch's size (Newton converges quadratically, and a distance is
+    stationary in its foot point), and a warm start, which converges in one or two steps,
+    no longer runs four.
     """
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     x = torch.as_tensor(points, dtype=surface.dtype, device=surface.device)
     warm = None if start is None else torch.as_tensor(start, dtype=surface.dtype, device=surface.device)
     with torch.no_grad():
-        proj = project_points(surface.detach(), x, periodic=(False, bool(closed_v)), params=warm)
+        proj = project_points(surface.detach(), x, periodic=(False, bool(closed_v)), params=warm, tol=FOOT_TOL,
+                              check_every=1)
     return proj.params.cpu().double().numpy(), proj.distance.cpu().double().numpy()
 
 
