@@ -200,3 +200,57 @@ def test_a_small_leftover_crosses_a_steep_seam_but_two_faces_do_not():
     for patch in res.patches:  # no patch holds both faces
         assert not {0, 1} <= set(labels[patch.inliers])
     assert res.metrics["completeness"] > 99
+
+
+def _wavy(n, seed):
+    xy = np.random.default_rng(seed).random((n, 2))
+    return np.c_[xy, 0.12 * np.sin(6 * xy[:, 0]) * np.cos(5 * xy[:, 1])]
+
+
+def test_point_distances_equal_the_cores_default_projection():
+    """point_distances stops Newton earlier (FOOT_TOL, checked every iteration) than the
+    core's default (eps ** 0.75, every 4): the distances agree to rounding, cold and warm."""
+    import torch
+
+    from nurbskit.core.project import project_points
+    from nurbskit.patches.refit import point_distances
+
+    p = _wavy(1500, 7)
+    pf = fit_patch(p, 0.01, Cfg(fit_points=400))
+    x = torch.as_tensor(p + 0.02 * np.random.default_rng(8).standard_normal(p.shape))
+    ref = project_points(pf.surface, x, periodic=(False, False)).distance.numpy()
+    _, cold = point_distances(pf.surface, x.numpy())
+    _, warm = point_distances(pf.surface, x.numpy(), start=pf.params)
+    assert np.max(np.abs(cold - ref)) < 1e-12
+    assert np.max(np.abs(warm - ref)) < 1e-9  # warm may settle in the same minimum from another side
+
+
+def test_a_grown_grid_is_solved_at_the_last_grids_feet_without_a_grid_search(monkeypatch):
+    """A candidate whose 4 x 4 fit is not enough grows its grid from the last grid's foot
+    points: the larger fit's alternation never starts from the grid (fit.alternate warm
+    first round), and it fits as well as a fit of that grid from scratch."""
+    import nurbskit.fit.lstsq as lstsq
+    from nurbskit.patches.refit import _fit_lsq
+
+    p = _wavy(400, 9)
+    cfg = Cfg(fit_points=400)
+    calls = []
+    real = lstsq.project_points
+
+    def spy(surface, points, **kw):
+        calls.append((surface.sizes, kw.get("params") is not None))
+        return real(surface, points, **kw)
+
+    monkeypatch.setattr(lstsq, "project_points", spy)
+    pf = fit_patch(p, 0.01, cfg)
+    assert pf.fits > 1 and pf.ctrl[0] > 4
+    grown = [warm for sizes, warm in calls if sizes[0] > 4]
+    assert grown and all(grown)  # every projection of a grown grid started warm
+    assert not calls[0][1]  # the first grid's first projection searched the grid
+    monkeypatch.undo()
+    # as good as a fit of the same grid from the plane parametrisation (mean squared distance)
+    _, _, _, scratch = _fit_lsq(p, pf.ctrl, False, cfg)
+    first = _fit_lsq(p, (4, 4), False, cfg)
+    _, _, _, warm = _fit_lsq(p, pf.ctrl, False, cfg, warm=first[2])
+    assert np.mean(warm**2) <= 1.2 * np.mean(scratch**2)
+    assert np.mean(warm < 0.005) > 0.95

@@ -152,7 +152,9 @@ def alternate(
     Shapes: ``points (N, 3)`` -> (surface, foot parameters ``(N, 2)``, mean squared
     distance after each round). Knots and weights stay as they are. Foot points come
     from :func:`nurbskit.core.project.project_points` (a closed v is its periodic
-    direction); ``params`` is accepted for compatibility and ignored in the first round. Stops early when
+    direction); ``params (N, 2)``, when given, warm-starts the first round's projection too (e.g. the
+    foot points of an earlier fit of the same points, to which the surface was just solved), as
+    the later rounds are; None: the first round starts from the grid. Stops early when
     a round improves the mean squared distance by less than ``tolerance``.
     """
     topo = _topology(topology)
@@ -160,7 +162,8 @@ def alternate(
     history: list[float] = []
 
     def feet(surface, warm):
-        # The one projection (core.project): from the grid in the first round, then warm
+        # The one projection (core.project): from the grid in the first round (unless warm
+        # parameters were given), then warm
         # from the last round's foot points (the least-squares step moves the surface little).
         if warm is None:
             return project_points(surface, points, periodic=periodic).params
@@ -168,7 +171,7 @@ def alternate(
 
     with torch.no_grad():
         for k in range(rounds):
-            params = feet(surface, params if k > 0 else None)
+            params = feet(surface, params)
             err = float((surface.evaluate(params) - points).square().sum(-1).mean())
             history.append(err)
             if callback is not None:

@@ -514,6 +514,9 @@ def fit_patches(
     for i, r in enumerate(final):
         reg = regions[r]
         owner[reg.members], dist[reg.members], params[reg.members] = i, reg.distance, reg.params
+    # a (point, patch) pair projected once is not projected again in a later round: the
+    # patch has not moved, so its distance has not either (and did not place the point)
+    tried = np.zeros((n, len(final)), dtype=bool)
     for _ in range(10):  # outliers next to newly assigned points get their turn in the next round
         out = np.flatnonzero(~(dist < eps))
         if not len(out):
@@ -521,7 +524,8 @@ def fit_patches(
         cand_labels = owner[nb[out]]  # patches of the outliers' neighbours
         moved = 0
         for i, r in enumerate(final):
-            pts = out[(cand_labels == i).any(axis=1) & (owner[out] != i)]
+            pts = out[(cand_labels == i).any(axis=1) & (owner[out] != i) & ~tried[out, i]]
+            tried[pts, i] = True
             if not len(pts):
                 continue
             p, d = point_distances(regions[r].surface, x[pts], regions[r].closed)
