@@ -363,7 +363,10 @@ def fit_patches(
             # recorded in the history (not a test): how the union treats the points along the
             # seam (points of one part with a kNN link into the other), for reading its decisions
             at = np.r_[(current[nb[regions[a].members]] == b).any(1), (current[nb[regions[b].members]] == a).any(1)]
-            un = surface_normals(pf.surface, pf.params[at])
+            # the union's normal at every member: the seam record reads it here, and an
+            # accepted union keeps it as its members' model normals (one evaluation, not two)
+            union_normals = surface_normals(pf.surface, pf.params)
+            un = union_normals[at]
             ang = np.degrees(np.arccos(np.clip(np.abs((un * part_normals[at]).sum(1)), 0, 1)))
             seam_diag[key] = dict(
                 fits=pf.fits, seam_pts=int(at.sum()),
@@ -378,8 +381,7 @@ def fit_patches(
             else:
                 (ma, na), (mb, nb_) = regions[a].moments, regions[b].moments
                 cand = _Region(members, pf.distance, pf.params, pf.surface, pf.closed, (ma + mb, na + nb_),
-                               regions[a].origin + regions[b].origin, pf.topology,
-                               surface_normals(pf.surface, pf.params))
+                               regions[a].origin + regions[b].origin, pf.topology, union_normals)
             cache[key] = cand
         record = {"a": a, "b": b, "priority": e, "energy_before": u}
         if key in crease_log:
