@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
 from nurbskit.cli import main
 
 
@@ -16,3 +20,16 @@ def run(argv) -> int:
 def one_line(err: str) -> bool:
     """What stderr must be for a user's mistake: one line, no traceback."""
     return "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def run_shape_cli(root: Path, clouds: dict) -> dict:
+    """``nurbskit shape --kind KIND --iters 0`` (no refinement, no figures) on each cloud of
+    ``{kind: cloud}`` (``cloud.points (N, 3)``), saved as ``root/KIND.npy``: ``{kind:
+    the output folder root/KIND}``."""
+    out = {}
+    for kind, cloud in clouds.items():
+        src = root / f"{kind}.npy"
+        np.save(src, cloud.points.numpy())
+        assert main(["shape", str(src), "--kind", kind, "--iters", "0", "--no-figures", "--out", str(root / kind)]) == 0
+        out[kind] = root / kind
+    return out

@@ -18,6 +18,7 @@ import pytest
 import torch
 
 from _cad import require_extra
+from _cli import run_shape_cli
 
 import nurbskit
 from nurbskit.core.construct import extrude, revolve
@@ -131,18 +132,10 @@ def test_bad_sweeps_are_refused():
 @pytest.fixture(scope="module")
 def shape_outputs(tmp_path_factory):
     """`nurbskit shape` on a synthetic vase and an extruded wave (no refinement: fast)."""
-    from nurbskit.cli import main
     from nurbskit.shapes.synthetic import extrusion_cloud, vase_cloud
 
-    root = tmp_path_factory.mktemp("shapes")
-    out = {}
     clouds = {"revolution": vase_cloud(600, 0.0, 4, angle=4.0), "extrusion": extrusion_cloud(600, 0.0, 5)}
-    for kind, cloud in clouds.items():
-        src = root / f"{kind}.npy"
-        np.save(src, cloud.points.numpy())
-        assert main(["shape", str(src), "--kind", kind, "--iters", "0", "--no-figures", "--out", str(root / kind)]) == 0
-        out[kind] = root / kind
-    return out
+    return run_shape_cli(tmp_path_factory.mktemp("shapes"), clouds)
 
 
 @pytest.mark.parametrize("kind", ["revolution", "extrusion"])

@@ -122,6 +122,18 @@ def test_a_fillet_cut_into_strips_merges_with_its_faces():
     assert res.metrics["P_cov_i"] > 99
 
 
+def _two_faces_and_a_strip():
+    """Two perpendicular unit faces (600 points each, labels 0 and 1) and a 24-point strip
+    along their edge (label 2), half on each face's plane: ``(points (1224, 3), labels)``."""
+    rng = np.random.default_rng(4)
+    a, b, c = rng.random((600, 2)), rng.random((600, 2)), rng.random((24, 2))
+    p = np.vstack([np.c_[0.01 + 0.99 * a[:, 0], a[:, 1], np.zeros(600)],
+                   np.c_[np.zeros(600), b[:, 1], 0.01 + 0.99 * b[:, 0]],
+                   np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
+                            np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
+    return p, np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
+
+
 def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
     """Two perpendicular faces and a 24-point strip along their edge, a region of its own.
 
@@ -130,13 +142,7 @@ def test_a_leftover_strip_at_an_edge_is_absorbed_by_its_neighbours():
     within eps of both faces' surfaces, so dissolving it lowers the energy and keeps them
     inliers.
     """
-    rng = np.random.default_rng(4)
-    a, b, c = rng.random((600, 2)), rng.random((600, 2)), rng.random((24, 2))
-    p = np.vstack([np.c_[0.01 + 0.99 * a[:, 0], a[:, 1], np.zeros(600)],
-                   np.c_[np.zeros(600), b[:, 1], 0.01 + 0.99 * b[:, 0]],
-                   np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
-                            np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
-    labels = np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
+    p, labels = _two_faces_and_a_strip()
     kept = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, leftover=0, absorb=0), init_labels=labels)
     res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, leftover=0), init_labels=labels)
     assert len(kept) == 3 and len(res) == 2
@@ -186,13 +192,7 @@ def test_a_small_leftover_crosses_a_steep_seam_but_two_faces_do_not():
     """The leftover strip of the absorption case (24 of 1,224 points, at 45 degrees to both
     faces) merges into a face across the 10-degree seam limit (the energy decides a
     leftover's merge); the two faces (600 points each) still never merge."""
-    rng = np.random.default_rng(4)
-    a, b, c = rng.random((600, 2)), rng.random((600, 2)), rng.random((24, 2))
-    p = np.vstack([np.c_[0.01 + 0.99 * a[:, 0], a[:, 1], np.zeros(600)],
-                   np.c_[np.zeros(600), b[:, 1], 0.01 + 0.99 * b[:, 0]],
-                   np.where(np.arange(24)[:, None] < 12, np.c_[0.01 * c[:, 0], c[:, 1], np.zeros(24)],
-                            np.c_[np.zeros(24), c[:, 1], 0.01 * c[:, 0]])])
-    labels = np.r_[np.zeros(600), np.ones(600), np.full(24, 2)].astype(np.int64)
+    p, labels = _two_faces_and_a_strip()
     res = fit_patches(p, config=PatchConfig(final_iters=0, crease_seam=10, absorb=0), init_labels=labels)
     merged = [h for h in res.history if h["accepted"]]
     assert len(merged) == 1 and 2 in (merged[0]["a"], merged[0]["b"]) and merged[0]["seam_angle"] > 10

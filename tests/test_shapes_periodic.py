@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from _assert import assert_close
+from _cli import run_shape_cli
 from _extras import require_extra
 from test_shapes import _assert_smooth_seam, _extrude_rings, _rounded_rectangle
 
@@ -102,17 +103,9 @@ def test_closed_profile_seam_is_not_where_the_ordering_starts():
 @pytest.fixture(scope="module")
 def closed_shapes(tmp_path_factory):
     """`nurbskit shape` on a torus (revolution) and an elliptic tube (extrusion), no refinement."""
-    from nurbskit.cli import main
-
     root = tmp_path_factory.mktemp("closed")
     clouds = {"revolution": torus_cloud(800, 0.0, 1), "extrusion": tube_cloud(800, 0.0, 2, section="ellipse")}
-    out = {}
-    for kind, cloud in clouds.items():
-        src = root / f"{kind}.npy"
-        np.save(src, cloud.points.numpy())
-        assert main(["shape", str(src), "--kind", kind, "--iters", "0", "--no-figures", "--out", str(root / kind)]) == 0
-        out[kind] = root / kind
-    return out
+    return run_shape_cli(root, clouds)
 
 
 def _uv(surface, n: int = 60, seed: int = 4) -> torch.Tensor:
