@@ -11,7 +11,12 @@ Questions and method:
    Each batch runs on a local cluster made by :func:`nurbskit.batch.runner.connect`;
    the cluster is started and every worker warmed (one fit each, which imports torch's
    optimizer machinery) before the clock starts; start-up is timed separately.
-   Throughput = items / wall seconds.
+   Throughput = items / wall seconds. The ratio is measured in ``--rounds`` rounds (3 by
+   default), each timing a 1-worker and a 2-worker batch back to back, in the order 1-2,
+   2-1, 1-2, ...; the result is the median of the rounds' ratios. This machine's speed
+   drifts by up to 20 % over minutes (the same items took 3.8 to 4.6 CPU s each in runs
+   an hour apart, with nothing else running), which a single pair of runs cannot tell
+   from a change in scaling; the rounds pair runs minutes apart and alternate their order.
 2. **Per-task overhead** (goal <= 0.3 s), three ways:
    - against the API in a loop: (batch wall on 1 worker - the same items through the
      same per-item function, :func:`nurbskit.batch.task.run_item`, in a loop in this
@@ -40,10 +45,10 @@ Timings on the shared 2-core machine are contended (load is recorded with each r
 the ratio of 2 to 1 workers is the number to re-run on a quiet machine. Memory and
 counts do not depend on load.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 10 minutes on a quiet
-2-core machine, 30-60 contended; writes ``results/batch.json`` and ``batch.md``).
+Run: ``PYTHONPATH=src python benchmarks/bench_batch.py`` (about 15 minutes on a quiet
+2-core machine with 3 rounds; writes ``results/batch.json`` and ``batch.md``).
 ``--quick``: 6 inputs, few iterations (``batch_quick``); ``--iters N``: fewer fit
-iterations (stated in the results); ``--skip-memory``: no scheduler-memory part (it is
+iterations (stated in the results); ``--rounds R``; ``--skip-memory``: no scheduler-memory part (it is
 also run alone by ``--memory-only``, into ``batch_memory``).
 """
 
@@ -53,6 +58,7 @@ import json
 import os
 import pickle
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -255,12 +261,16 @@ def main() -> None:
         FIT_OPTIONS[:] = ["--iters", "10", "--max-points", "1000", "--no-figures"]
     if _option("--iters"):
         FIT_OPTIONS[FIT_OPTIONS.index("--iters") + 1] = str(int(_option("--iters")))
+    rounds = int(_option("--rounds", 3))
     load_before = os.getloadavg()
+    ones, twos = [], []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         loop_t, loop_cpu, loop_records = loop_seconds(files, tmp / "loop")
-        one = batch_seconds(files, tmp / "one", 1)
-        two = batch_seconds(files, tmp / "two", 2)
+        for k in range(rounds):  # 1-2, 2-1, 1-2, ...: a drift of the machine's speed falls on both alike
+            for workers in ((1, 2) if k % 2 == 0 else (2, 1)):
+                run = batch_seconds(files, tmp / f"r{k}w{workers}", workers)
+                (ones if workers == 1 else twos).append(run)
     load_after = os.getloadavg()
     n = len(files)
     result = {}
@@ -268,7 +278,6 @@ def main() -> None:
         result["memory"] = scheduler_memory()
         result["memory_all_at_once"] = scheduler_memory(all_at_once=True)
         result["memory_all_at_once_unpacked"] = scheduler_memory(all_at_once=True, packed=False)
-    ok = [sum(r["status"] == "ok" for r in recs) for recs in (loop_records, one["records"], two["records"])]
 
     def derived(run: dict) -> dict:
         w, wall = run["workers"], run["wall_seconds"]
@@ -280,36 +289,49 @@ def main() -> None:
                 "overhead_cpu_s": (cpu - loop_cpu) / n, "efficiency": run["efficiency"],
                 "cpu_share": item_cpu / item_s, "dispatch_wall_s": (w * wall - item_s) / n}
 
-    d1, d2 = derived(one), derived(two)
-    speedup = one["wall_seconds"] / two["wall_seconds"]
+    median = statistics.median
+    ratios = [one["wall_seconds"] / two["wall_seconds"] for one, two in zip(ones, twos)]
+    speedup = median(ratios)
+    d1s, d2s = [derived(r) for r in ones], [derived(r) for r in twos]
+    d1 = {key: median(d[key] for d in d1s) for key in d1s[0]}
+    d2 = {key: median(d[key] for d in d2s) for key in d2s[0]}
     projected = 2 * (d1["cpu_per_item_s"] + d1["dispatch_wall_s"]) / (d2["cpu_per_item_s"] + d2["dispatch_wall_s"])
+    one_wall = median(r["wall_seconds"] for r in ones)
     rows = [
-        {"run": "API in a loop (this process)", "workers": 0, "items": n, "ok": ok[0], "wall_s": loop_t,
+        {"run": "API in a loop (this process)", "workers": 0, "items": n,
+         "ok": sum(r["status"] == "ok" for r in loop_records), "wall_s": loop_t,
          "items_per_s": n / loop_t, "start_s": 0.0, "overhead_vs_loop_s": 0.0, "overhead_wall_s": 0.0,
          "idle_fraction": 0.0, "worker_cpu_s": loop_cpu, "cpu_per_item_s": loop_cpu / n, "overhead_cpu_s": 0.0,
          "efficiency": loop_cpu / loop_t},
-        {"run": "batch, 1 worker", "workers": 1, "items": n, "ok": ok[1], "wall_s": one["wall_seconds"],
-         "items_per_s": n / one["wall_seconds"], "start_s": one["start_seconds"] + one["warm_seconds"],
-         "overhead_vs_loop_s": (one["wall_seconds"] - loop_t) / n, **d1},
-        {"run": "batch, 2 workers", "workers": 2, "items": n, "ok": ok[2], "wall_s": two["wall_seconds"],
-         "items_per_s": n / two["wall_seconds"], "start_s": two["start_seconds"] + two["warm_seconds"],
-         "overhead_vs_loop_s": (2 * two["wall_seconds"] - loop_t) / n, **d2},
     ]
+    for k in range(rounds):
+        for run, d in ((ones[k], d1s[k]), (twos[k], d2s[k])):
+            w = run["workers"]
+            rows.append({
+                "run": f"round {k + 1}: batch, {w} worker{'s' if w > 1 else ''}", "workers": w, "items": n,
+                "ok": sum(r["status"] == "ok" for r in run["records"]), "wall_s": run["wall_seconds"],
+                "items_per_s": n / run["wall_seconds"], "start_s": run["start_seconds"] + run["warm_seconds"],
+                "overhead_vs_loop_s": (w * run["wall_seconds"] - loop_t) / n, **d,
+                "ratio_2_vs_1": ratios[k]})
     meta = {
-        "fit_options": FIT_OPTIONS, "inputs": [str(f.relative_to(DATA)) for f in files],
-        "throughput_ratio_2_vs_1": speedup, "projected_ratio_idle_machine": projected, "goal_ratio": 1.7,
-        "overhead_per_item_s_vs_loop": (one["wall_seconds"] - loop_t) / n,
+        "fit_options": FIT_OPTIONS, "inputs": [str(f.relative_to(DATA)) for f in files], "rounds": rounds,
+        "throughput_ratio_2_vs_1": speedup, "throughput_ratio_2_vs_1_per_round": ratios,
+        "projected_ratio_idle_machine": projected, "goal_ratio": 1.7,
+        "overhead_per_item_s_vs_loop": (one_wall - loop_t) / n,
         "overhead_per_item_s_within_1_worker": d1["overhead_wall_s"],
         "overhead_per_item_s_within_2_workers": d2["overhead_wall_s"],
         "overhead_per_item_cpu_s_1_worker": d1["overhead_cpu_s"], "goal_overhead_s": 0.3,
-        "loop_cpu_seconds": loop_cpu, "runs": {"one": {k: v for k, v in one.items() if k != "records"},
-                                               "two": {k: v for k, v in two.items() if k != "records"}},
+        "loop_cpu_seconds": loop_cpu,
+        "runs": {"one": [{k: v for k, v in r.items() if k != "records"} for r in ones],
+                 "two": [{k: v for k, v in r.items() if k != "records"} for r in twos]},
         "load_average_before": load_before, "load_average_after": load_after, "cpu_count": os.cpu_count(),
         "contended": max(load_before[0], load_after[0]) > (os.cpu_count() or 1),
-        "item_seconds": {name: [r["seconds"] for r in recs] for name, recs in
-                         (("loop", loop_records), ("one", one["records"]), ("two", two["records"]))},
-        "item_cpu_seconds": {name: [r["cpu_seconds"] for r in recs] for name, recs in
-                             (("loop", loop_records), ("one", one["records"]), ("two", two["records"]))},
+        "item_seconds": {"loop": [r["seconds"] for r in loop_records],
+                         "one": [[r["seconds"] for r in run["records"]] for run in ones],
+                         "two": [[r["seconds"] for r in run["records"]] for run in twos]},
+        "item_cpu_seconds": {"loop": [r["cpu_seconds"] for r in loop_records],
+                             "one": [[r["cpu_seconds"] for r in run["records"]] for run in ones],
+                             "two": [[r["cpu_seconds"] for r in run["records"]] for run in twos]},
         **{f"scheduler_{k}": v for k, v in result.items()},
     }
     memory_note = ""
@@ -323,14 +345,16 @@ def main() -> None:
             f"goal < 300 MB). ")
     notes = (
         f"{n} inputs (6 ABC clouds, 20 thesis meshes/clouds) through `nurbskit batch fit` {' '.join(FIT_OPTIONS)}. "
-        f"Throughput 2 vs 1 workers: **{speedup:.2f}x** (goal >= 1.7x); efficiency (workers' CPU s / (wall x "
+        f"Throughput 2 vs 1 workers: **{speedup:.2f}x** (goal >= 1.7x; the median over {rounds} rounds, each "
+        f"timing 1 and 2 workers back to back, in the order 1-2, 2-1, ...: "
+        f"{', '.join(f'{r:.2f}x' for r in ratios)}); medians over the rounds follow: efficiency (workers' CPU s / (wall x "
         f"workers)) {d1['efficiency']:.2f} on 1 worker, {d2['efficiency']:.2f} on 2; projected on an idle machine "
         f"from CPU time per item and dispatch time: **{projected:.2f}x**. Per-item overhead: "
         f"**{d1['overhead_wall_s']:.3f} s** of wall time outside the items on 1 worker "
         f"({d2['overhead_wall_s']:.3f} worker-s on 2; largest worker idle fraction {d1['idle_fraction']:.3f} / "
         f"{d2['idle_fraction']:.3f}); in CPU time against the loop **{d1['overhead_cpu_s']:+.3f} s** (1 worker: "
         f"worker + client + scheduler CPU - the loop's CPU, per item); wall against the loop "
-        f"{meta['overhead_per_item_s_vs_loop']:+.3f} s (noisy under load) (goal <= 0.3 s). "
+        f"{meta['overhead_per_item_s_vs_loop']:+.3f} s (noisy: the machine's speed drifts between runs) (goal <= 0.3 s). "
         f"CPU share of the items (their CPU s / their wall s): loop {loop_cpu / sum(r['seconds'] for r in loop_records):.2f}, "
         f"1 worker {d1['cpu_share']:.2f}, 2 workers {d2['cpu_share']:.2f}. " + memory_note
         + f"Load average before/after: {load_before[0]:.1f} / {load_after[0]:.1f} on {os.cpu_count()} cores"
@@ -341,7 +365,7 @@ def main() -> None:
                ("overhead_wall_s", "wall outside items per item s"), ("idle_fraction", "worker idle fraction (max)"),
                ("worker_cpu_s", "CPU s (workers)"), ("cpu_per_item_s", "CPU s per item"),
                ("overhead_cpu_s", "CPU overhead per item s"), ("efficiency", "efficiency"),
-               ("overhead_vs_loop_s", "wall overhead vs loop per item s")]
+               ("overhead_vs_loop_s", "wall overhead vs loop per item s"), ("ratio_2_vs_1", "round's 2 vs 1")]
     name = "batch_quick" if "--quick" in sys.argv else "batch"  # a quick run never replaces the full one
     path = write_results(name, rows, columns, meta=meta, title="nurbskit batch: 1 vs 2 workers, overhead, memory",
                          notes=notes)

@@ -253,6 +253,16 @@ def test_local_workers_allocate_like_a_plain_process(client):
     # and without the statistical profiler sampling the fits' stacks every 10 ms
     profiling = client.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
     assert set(profiling.values()) == {False}
+    # and with Dask's diagnostic tick and system monitor slowed (the idle cluster's CPU), in the
+    # workers and the scheduler, while the memory monitor that enforces --memory-limit keeps 100 ms
+    def intervals(dask_worker=None, dask_scheduler=None):
+        callbacks = (dask_worker or dask_scheduler).periodic_callbacks
+        return {name: callbacks[name].callback_time for name in ("tick", "monitor", "memory_monitor")
+                if name in callbacks}
+
+    expected = {"tick": 200, "monitor": 2000}
+    assert list(client.run(intervals).values()) == [{**expected, "memory_monitor": 100}] * 2
+    assert client.run_on_scheduler(intervals) == expected
 
 
 def test_dataframe_return_needs_pandas(client, tmp_path, monkeypatch):

@@ -132,6 +132,14 @@ def connect(client=None, scheduler: str | None = None, *, workers: int | None = 
         # fitting loops' deep Python stacks made that 8-15 % of an item's CPU time
         # (measured, 3 ABC clouds, on and off twice). The dashboard's Profile page is the price.
         "distributed.worker.profile.enabled": False,
+        # An idle local cluster of 2 workers took 124 ms of CPU per second (6 % of a 2-core
+        # machine, taken from the items once every core computes), most of it Dask's 20 ms
+        # event-loop health tick in this process and each worker, then the 500 ms system
+        # monitor (dashboard statistics). Both are diagnostics; at 200 ms and 2 s the idle
+        # cluster takes about 49 ms/s (docs/batch.md, "Cluster"). The memory monitor, which
+        # enforces --memory-limit, keeps its 100 ms.
+        "distributed.admin.tick.interval": "200ms",
+        "distributed.admin.system-monitor.interval": "2s",
     }
     # Held for the cluster's whole life, not only its start: a nanny keeps a shallow copy of
     # the configuration, whose nested settings revert when the context ends, and a worker
