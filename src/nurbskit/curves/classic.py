@@ -16,7 +16,9 @@ Steps (each a library call where one exists):
    stem, a curve crossing itself one stroke, a hairpin (a curve turning back on itself)
    one stroke, two curves touching near-tangentially two strokes sharing the stretch.
    Then each junction's pairing is re-chosen for the fewest control points and curves
-   that describe the whole strokes (``_fewest_curves``, minimum description length).
+   that describe the whole strokes (``_fewest_curves``, minimum description length),
+   and short edges between nodes of odd degree are tried as shared by two curves (walked
+   twice), kept where the description is shorter.
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -510,7 +512,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     origin = (c0 + 0.5, r0 + 0.5)
     extent = float(np.hypot(*ink.shape))
     if simplify and tolerance is not None and extent <= _SEARCH_EXTENT:
-        partner = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent)
+        partner, tips = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent)
     out = [pts for pts, _ in _chains(edges, partner, tips, trim, origin)]
     out = _join_broken(out, width)
     return out, width
@@ -525,6 +527,10 @@ _CURVE_COST = 4.0
 _SEARCH_EXTENT = 256.0
 # Junctions with more branch ends than this keep their good-continuation pairing.
 _SEARCH_ENDS = 6
+# Edges between two nodes of odd degree (junctions, or a junction and a dead end) up to
+# this many stroke widths, plus as many pixels, are tried as shared by two curves (see
+# _fewest_curves).
+_SHARED = 10.0
 # Points per stroke at most when scoring it.
 _SCORE_POINTS = 96
 # Strokes are scored at this many times the fit tolerance, or at this fraction of the
@@ -632,7 +638,22 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     alone) tries every pairing of its ends with the others fixed, keeps the cheapest,
     until a pass changes nothing (at most 3 passes). Fits are cached by stroke.
 
-    Returns the new ``partner`` (a copy).
+    Shared edges: at a node of odd degree at least one curve ends, so a graph with many
+    odd nodes is read as many curves. Two odd nodes joined by a short edge are often no
+    curve's end: a shallow crossing whose skeleton runs along one segment between two
+    three-way junctions, or a curve turning back sharply whose two sides merged into one
+    line up to its tip, where the geometric rule of ``_pair_ends`` (a fork, then a stem)
+    did not fire. After the descent, each edge joining two odd nodes (up to ``_SHARED``
+    times (width + 1) px, nodes up to ``_SEARCH_ENDS - 1`` ends) is tried as walked twice:
+    a copy of it is added, both nodes become even, every perfect pairing of their ends
+    is scored (a dead end's two copies join at the tip, as a hairpin), and the copy is
+    kept when the description is shorter; then the descent runs again. In the search's
+    terms this is a move the per-junction descent cannot make, since it changes the graph
+    itself (the Chinese-postman view of covering a graph by few walks that may repeat an
+    edge; Edmonds and Johnson, "Matching, Euler tours and the Chinese postman", 1973).
+
+    Returns the new ``partner`` (a copy) and ``tips``; the copies kept are appended to
+    ``edges``.
     """
     from scipy.ndimage import gaussian_filter1d
 
@@ -649,7 +670,7 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     nodes = [k for k, ends in at.items() if k not in done and least <= len(ends) <= _SEARCH_ENDS
              and not any(e in fixed for e in ends)]
     if not nodes:
-        return partner
+        return partner, tips
     shortest = _min_length(width)
     cache: dict = {}
 
@@ -681,34 +702,95 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
         cache[key] = cost
         return cost
 
-    def total(p):
-        return sum(stroke_cost(pts, keys) for pts, keys in _chains(edges, p, tips, trim, origin))
+    # Edges that two curves may share (see the docstring): copies appended after the
+    # graph's edges, each used only once accepted. ``ext`` is the graph with every
+    # candidate copy; ``active`` the edges of the current description.
+    n_edges = len(edges)
+    shared = [i for i, (a, b, path) in enumerate(edges)
+              if a >= 0 and b >= 0 and a != b and a not in done and b not in done
+              and not any(e in fixed for e in ((i, 0), (i, 1)))
+              and len(at[a]) % 2 == 1 and len(at[b]) % 2 == 1 and max(len(at[a]), len(at[b])) >= 3
+              and max(len(at[a]), len(at[b])) < _SEARCH_ENDS
+              and _arc_length(np.asarray(path, dtype=float)) <= _SHARED * (min(width, _THICK) + 1)]
+    ext = list(edges) + [edges[i] for i in shared]
+    active = set(range(n_edges))
+    tips = set(tips)
+
+    def total(p, act=None, tp=None):
+        return sum(stroke_cost(pts, keys) for pts, keys in
+                   _chains(ext, p, tips if tp is None else tp, trim, origin, active if act is None else act))
 
     partner = dict(partner)
     best = total(partner)
-    for _ in range(3):
-        changed = False
-        for k in nodes:
-            ends = at[k]
-            current = {e: partner[e] for e in ends if e in partner}
-            base = {e: f for e, f in partner.items() if e not in current}
-            for pairs in _matchings(ends, partial=len(ends) <= 4):
-                trial = dict(base)
-                for e, f in pairs:
-                    trial[e], trial[f] = f, e
-                if all(trial.get(e) == current.get(e) for e in ends):
+
+    def descend(passes):
+        nonlocal partner, best
+        for _ in range(passes):
+            changed = False
+            for k in nodes:
+                ends = at[k]
+                if len(ends) > _SEARCH_ENDS:
                     continue
-                cost = total(trial)
-                if cost < best - 1e-9:
-                    best, partner, changed = cost, trial, True
-                    current = {e: partner[e] for e in ends if e in partner}
-            # (the base of later trials at this node: the best so far)
-        if not changed:
-            break
-    return partner
+                current = {e: partner[e] for e in ends if e in partner}
+                base = {e: f for e, f in partner.items() if e not in current}
+                for pairs in _matchings(ends, partial=len(ends) <= 4):
+                    trial = dict(base)
+                    for e, f in pairs:
+                        trial[e], trial[f] = f, e
+                    if all(trial.get(e) == current.get(e) for e in ends):
+                        continue
+                    cost = total(trial)
+                    if cost < best - 1e-9:
+                        best, partner, changed = cost, trial, True
+                        current = {e: partner[e] for e in ends if e in partner}
+                # (the base of later trials at this node: the best so far)
+            if not changed:
+                break
+
+    descend(3)
+    accepted = []
+    for c, i in enumerate(shared):
+        a, b, _ = edges[i]
+        sa, sb = 0, 1
+        if len(at[a]) == 1:  # the end node (a hairpin's tip) as b
+            a, b, sa, sb = b, a, 1, 0
+        if len(at[a]) % 2 == 0 or len(at[b]) % 2 == 0:
+            continue  # a copy accepted next to it already evened a node
+        j = n_edges + c
+        act = active | {j}
+        ends_a, ends_b = at[a] + [(j, sa)], at[b] + [(j, sb)]
+        tip = len(at[b]) == 1
+        base = {e: f for e, f in partner.items() if e not in ends_a and e not in ends_b}
+        tp = tips | {(i, sb), (j, sb)} if tip else tips
+        choice = None
+        for side_a in _matchings(ends_a, partial=False):
+            for side_b in ([[((i, sb), (j, sb))]] if tip else _matchings(ends_b, partial=False)):
+                trial = dict(base)
+                for e, f in side_a + side_b:
+                    trial[e], trial[f] = f, e
+                cost = total(trial, act, tp)
+                if cost < best - 1e-9 and (choice is None or cost < choice[0]):
+                    choice = (cost, trial)
+        if choice is not None:
+            best, partner = choice
+            active, tips = act, tp
+            at[a], at[b] = ends_a, ends_b
+            accepted.append(j)
+            for k in (a, b):
+                if k not in nodes and 3 <= len(at[k]) <= _SEARCH_ENDS:
+                    nodes.append(k)
+    if accepted:
+        descend(2)
+    # The accepted copies become edges of the graph (appended, indices kept in order).
+    renum = {j: n_edges + x for x, j in enumerate(accepted)}
+    for j in accepted:
+        edges.append(ext[j])
+    fix = lambda e: (renum.get(e[0], e[0]), e[1])  # noqa: E731
+    out_tips = {fix(e) for e in tips}
+    return {fix(e): fix(f) for e, f in partner.items()}, out_tips
 
 
-def _chains(edges: list, partner: dict, tips: set, trim: int, origin: tuple) -> list:
+def _chains(edges: list, partner: dict, tips: set, trim: int, origin: tuple, active=None) -> list:
     """Edges chained into strokes through the ``partner`` links -> ``[(points (n, 2), ends)]``.
 
     ``points`` are pixel centres (x, y) (``origin`` added to (col, row)), consecutive
@@ -738,6 +820,8 @@ def _chains(edges: list, partner: dict, tips: set, trim: int, origin: tuple) -> 
             i, side = nxt
         return chain, tuple(keys)
 
+    if active is not None:  # edges left out of this description count as walked
+        used.update(i for i in range(len(edges)) if i not in active)
     walks = [walk(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner and i not in used]
     walks += [walk(i, 0) for i in range(len(edges)) if i not in used]  # closed chains
     for chain, keys in walks:
