@@ -8,6 +8,7 @@ from nurbskit.curves.classic import _fill_slivers, chamfer_points, fit_image
 from nurbskit.curves.synthetic import curve_of, dense_samples, render
 
 from _assert import assert_close
+from _curves import assert_counted_right
 
 
 def _polyline_image(polylines, size=(128, 128), width=2.0):
@@ -191,16 +192,7 @@ def test_drawn_crossings_counted_right_where_the_greedy_pairing_was_not():
     # Synthetic drawings (seeds outside the benchmark's) whose curve count the previous
     # pairing (greedy, each turn at most 60 degrees, unbounded junction clusters) got
     # wrong: 3, 1, 3, 5, 5 curves instead of 2, 2, 2, 3, 3.
-    from nurbskit.curves.synthetic import SyntheticConfig, make_sample
-
-    for n, i in ((2, 1), (2, 5), (2, 33), (3, 3), (3, 33)):
-        width = (1.0, 2.0, 3.0)[i % 3]
-        sample = make_sample(500_000 + i, SyntheticConfig(size=(128, 128), curves=(n, n), width=width))
-        curves, _ = fit_image(sample.image)
-        assert len(curves) == n, (n, i)
-        got = np.concatenate([dense_samples(c) for c in curves])
-        truth = np.concatenate([dense_samples(c) for c in sample.curves()])
-        assert chamfer_points(got, truth)["symmetric"] < 1.5
+    assert_counted_right(500_000, ((2, 1), (2, 5), (2, 33), (3, 3), (3, 33)))
 
 
 # An 8 x 8 digit (an "8", scikit-learn's bundled digits, index 53; BSD), grey 0..16.

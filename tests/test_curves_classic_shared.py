@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbskit.curves.classic import _chains, _fewest_curves, chamfer_points, fit_image
-from nurbskit.curves.synthetic import SyntheticConfig, dense_samples, make_sample
+from _curves import assert_counted_right
+
+from nurbskit.curves.classic import _chains, _fewest_curves
 
 
 def _pixels(p, q):
@@ -58,11 +59,4 @@ def test_drawn_crossings_counted_right_with_shared_edges():
     # that the pairing search without shared edges read as one curve too many (3, 3, 4
     # instead of 2, 2, 3: self-crossings and ends on other curves); a regression test of
     # the measured change, not a held-out measurement.
-    for n, i in ((2, 16), (2, 97), (3, 48)):
-        width = (1.0, 2.0, 3.0)[i % 3]
-        sample = make_sample(100_000 + i, SyntheticConfig(size=(128, 128), curves=(n, n), width=width))
-        curves, _ = fit_image(sample.image)
-        assert len(curves) == n, (n, i)
-        got = np.concatenate([dense_samples(c) for c in curves])
-        truth = np.concatenate([dense_samples(c) for c in sample.curves()])
-        assert chamfer_points(got, truth)["symmetric"] < 1.5
+    assert_counted_right(100_000, ((2, 16), (2, 97), (3, 48)))
