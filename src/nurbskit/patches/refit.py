@@ -118,15 +118,15 @@ def surface_normals(surface: NURBSSurface, params: np.ndarray) -> np.ndarray:
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
-def plane_patch_template(points: torch.Tensor, ctrl: tuple[int, int], degree: int) -> NURBSSurface:
-    """The fit's open start sheet for ``points (M, 3)`` (its knots: clamped, uniform on [0, 1])."""
-    surface, _ = plane_sheet(points, tuple(ctrl), (degree, degree))
-    return surface
+def plane_patch(points, ctrl: int | tuple[int, int], degree: int) -> NURBSSurface:
+    """A flat patch on the best-fitting plane of ``points (M, 3)``, over their bounding rectangle.
 
-
-def plane_patch(points: np.ndarray, ctrl: int, degree: int) -> NURBSSurface:
-    """A flat patch on the best-fitting plane of ``points``, over their bounding rectangle."""
-    surface, _ = plane_sheet(torch.as_tensor(points, dtype=torch.float64), (ctrl, ctrl), (degree, degree))
+    The fit's open start sheet (knots clamped, uniform on [0, 1]). ``points``: an array
+    (taken as float64) or a tensor (kept on its device); ``ctrl``: control points per
+    direction, one number or ``(n_u, n_v)``.
+    """
+    x = points if torch.is_tensor(points) else torch.as_tensor(points, dtype=torch.float64)
+    surface, _ = plane_sheet(x, (ctrl, ctrl) if isinstance(ctrl, int) else tuple(ctrl), (degree, degree))
     return surface
 
 
@@ -156,7 +156,7 @@ def _fit_lsq(points: np.ndarray, ctrl: tuple[int, int], closed: bool, cfg, warm:
         # the grid grows: the earlier fit's foot points are a parametrisation of these points
         # that the new grid (same domain, [0, 1]^2) can be solved at directly
         start = torch.as_tensor(warm, dtype=xn.dtype, device=xn.device)
-        template = plane_patch_template(xn, ctrl, cfg.degree)
+        template = plane_patch(xn, ctrl, cfg.degree)
         topology = Topology()
         cp = solve_control_points(start, xn, template.knot_vectors, template.degrees, template.sizes, None, topology,
                                   base.init.smoothness)
