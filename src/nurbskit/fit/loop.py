@@ -43,6 +43,7 @@ from ..core.knots import knots_to_logits
 from ..core.project import project_points
 from .lstsq import equidistributed_knots, solve_control_points
 from .matching import one_to_one_matching
+from .optim import LBFGS
 from .params import SurfaceParameters
 
 Tensor = torch.Tensor
@@ -253,17 +254,15 @@ def eliminated_control_points(surface, target: Target, topology) -> Tensor:
 
 
 def make_optimizer(stage: StageConfig, tensors: list[Tensor]) -> torch.optim.Optimizer:
-    """Adam, SGD (momentum 0.9) or L-BFGS (strong Wolfe line search) over ``tensors``."""
+    """Adam, SGD (momentum 0.9) or L-BFGS (:class:`.optim.LBFGS`, strong Wolfe line search) over ``tensors``."""
     if stage.optimizer == "adam":
         return torch.optim.Adam(tensors, lr=stage.lr)
     if stage.optimizer == "sgd":
         return torch.optim.SGD(tensors, lr=stage.lr, momentum=0.9)
     if stage.optimizer == "lbfgs":
-        # max_eval bounds the line search too (torch derives it from max_iter=1 as 1: no search at all).
-        return torch.optim.LBFGS(
-            tensors, lr=stage.lr, max_iter=1, max_eval=25, history_size=20, line_search_fn="strong_wolfe",
-            tolerance_grad=1e-14, tolerance_change=1e-16,
-        )
+        # One L-BFGS iteration per loop iteration; its curvature pairs come from its own
+        # line search, so refreshing the foot points between steps does not spoil them.
+        return LBFGS(tensors, lr=stage.lr, history_size=20, max_eval=25, tolerance_change=1e-16)
     raise OptionError(f"optimizer must be adam, sgd or lbfgs, got {stage.optimizer!r}")
 
 

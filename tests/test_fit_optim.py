@@ -1,0 +1,85 @@
+"""The fitting loop's L-BFGS (nurbskit.fit.optim): torch's iterates on a fixed objective,
+secant pairs from one objective when it changes, and a direction without host reads."""
+
+from __future__ import annotations
+
+import torch
+from _assert import assert_close
+
+from nurbskit._opcount import OperationCounter
+from nurbskit.fit.optim import LBFGS
+
+F64 = torch.float64
+
+
+def _rosenbrock(x: torch.Tensor) -> torch.Tensor:
+    return ((1 - x[:-1]).square() + 100 * (x[1:] - x[:-1].square()).square()).sum()
+
+
+def _closure(opt, x, f):
+    def closure():
+        opt.zero_grad()
+        loss = f(x)
+        loss.backward()
+        return loss
+    return closure
+
+
+def test_on_a_fixed_objective_it_takes_torchs_lbfgs_steps():
+    # With nothing refreshed between steps, the pair from the line search's ends is the
+    # pair torch forms from consecutive starts: the same iterates, up to rounding.
+    start = torch.tensor([-1.2, 1.0, -0.5, 0.8, 1.5], dtype=F64)
+    ours = start.clone().requires_grad_()
+    theirs = start.clone().requires_grad_()
+    a = LBFGS([ours], lr=1.0, history_size=5)
+    b = torch.optim.LBFGS([theirs], lr=1.0, max_iter=1, max_eval=25, history_size=5, line_search_fn="strong_wolfe",
+                          tolerance_grad=1e-14, tolerance_change=1e-16)
+    for _ in range(25):
+        la = a.step(_closure(a, ours, _rosenbrock))
+        lb = b.step(_closure(b, theirs, _rosenbrock))
+        assert_close(la.detach(), lb.detach(), atol=1e-10)
+        assert_close(ours.detach(), theirs.detach(), atol=1e-9)
+    assert float(_rosenbrock(ours.detach())) < 1.0  # it does descend (from 355.7)
+
+
+def test_pairs_come_from_one_objective_when_it_changes_between_steps():
+    # f_k(x) = 0.5 x^T A x - b_k^T x with b_k moving every step (as foot points move in a
+    # fit): every stored pair must satisfy the secant equation of the true Hessian,
+    # y = A s, which a pair of gradients of two different objectives does not.
+    g = torch.Generator().manual_seed(3)
+    Q = torch.linalg.qr(torch.randn(6, 6, generator=g, dtype=F64))[0]
+    A = Q @ torch.diag(torch.tensor([1.0, 2.0, 4.0, 8.0, 16.0, 32.0], dtype=F64)) @ Q.T
+    x = torch.zeros(6, dtype=F64, requires_grad=True)
+    opt = LBFGS([x], lr=1.0)
+    for k in range(8):
+        b = torch.randn(6, generator=g, dtype=F64)
+        opt.step(_closure(opt, x, lambda x, b=b: 0.5 * x @ A @ x - b @ x))
+    opt._remember(*opt._pending)
+    assert len(opt._s) == 8
+    for s, y in zip(opt._s, opt._y):
+        assert_close(y, A @ s, atol=1e-12)
+
+
+def test_the_direction_reads_nothing_back_to_the_host():
+    x = torch.tensor([-1.2, 1.0, -0.5, 0.8], dtype=F64, requires_grad=True)
+    opt = LBFGS([x], lr=1.0)
+    for _ in range(6):
+        opt.step(_closure(opt, x, _rosenbrock))
+    opt._remember(*opt._pending)
+    grad = torch.ones(4, dtype=F64)
+    with OperationCounter() as count:
+        d = opt._direction(grad)
+    assert count.host_reads == 0, count.host_read_names()
+    assert float(d @ grad) < 0  # a descent direction: H stays positive definite
+
+
+def test_a_pair_without_positive_curvature_drops_out():
+    # y . s <= 0 (a concave stretch): the pair is kept with rho = 0, so the direction is
+    # the one without it.
+    x = torch.zeros(3, dtype=F64, requires_grad=True)
+    opt = LBFGS([x])
+    opt._remember(torch.tensor([1.0, 0.0, 0.0], dtype=F64), torch.tensor([1.0, 0.5, 0.0], dtype=F64))
+    grad = torch.tensor([0.3, -0.2, 0.7], dtype=F64)
+    before = opt._direction(grad.clone())
+    opt._remember(torch.tensor([0.0, 1.0, 0.0], dtype=F64), torch.tensor([0.0, -2.0, 1.0], dtype=F64))
+    assert_close(opt._direction(grad.clone()), before, atol=1e-15)
