@@ -21,14 +21,22 @@ L-BFGS reads its scalars in the line search). ``--compare-cpu`` also fits the si
 fitted surfaces (64 x 64 samples of each projected onto the other, over the diagonal; the
 parametrisations may differ by the sign of a principal axis).
 
+The optimiser: the loop's L-BFGS (:class:`nurbskit.fit.optim.LBFGS`) against
+``torch.optim.LBFGS`` configured as the loop used it before (one iteration per step,
+strong Wolfe, history 20), swapped in for ``--peer-optimizer`` sizes in the same process:
+loss evaluations per loop iteration (the start of the step and the line search), CPU
+seconds (``time.process_time``, which the load of the shared machine does not inflate as
+it does the wall clock), iterations, operations and host reads, and the fit's accuracy.
+
 Usage: ``python benchmarks/bench_fit_scale.py [--device cpu|cuda] [--sizes 5000 20000 ...]
-[--skip-1m] [--compare-cpu] [--threads 2] [--out FILE]``; writes
+[--skip-1m] [--compare-cpu] [--peer-optimizer 5000 20000] [--threads 2] [--out FILE]``; writes
 ``benchmarks/results/fit_scale.{json,md}`` (``results/gpu/`` for CUDA).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import statistics
 import sys
@@ -83,19 +91,61 @@ def _sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
+@contextlib.contextmanager
+def torch_lbfgs():
+    """The loop steps ``torch.optim.LBFGS`` as it did before :mod:`nurbskit.fit.optim`."""
+    from nurbskit.fit import loop
+
+    ours = loop.make_optimizer
+
+    def make(stage, tensors):
+        if stage.optimizer != "lbfgs":
+            return ours(stage, tensors)
+        # max_eval bounds the line search too (torch derives it from max_iter=1 as 1).
+        return torch.optim.LBFGS(tensors, lr=stage.lr, max_iter=1, max_eval=25, history_size=20,
+                                 line_search_fn="strong_wolfe", tolerance_grad=1e-14, tolerance_change=1e-16)
+
+    loop.make_optimizer = make
+    try:
+        yield
+    finally:
+        loop.make_optimizer = ours
+
+
+@contextlib.contextmanager
+def counting_evaluations():
+    """Counts the loss evaluations of the loop (``stage_loss`` calls): ``[count]``."""
+    from nurbskit.fit import loop
+
+    ours, count = loop.stage_loss, [0]
+
+    def counted(*args, **kwargs):
+        count[0] += 1
+        return ours(*args, **kwargs)
+
+    loop.stage_loss = counted
+    try:
+        yield count
+    finally:
+        loop.stage_loss = ours
+
+
 def fit_once(points, device: str) -> dict:
     from nurbskit.fit import fit_surface
 
     _sync(device)
-    t0 = time.perf_counter()
-    result = fit_surface(points.to(device), _config(device))
-    _sync(device)
-    seconds = time.perf_counter() - t0
+    with counting_evaluations() as evaluations:
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = fit_surface(points.to(device), _config(device))
+        _sync(device)
+        seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     return {
         "result": result,
         "seconds": seconds,
+        "cpu_seconds": cpu_seconds,
         "loop_seconds": result.loop_seconds,
         "iterations": result.iterations,
+        "evaluations_per_iteration": evaluations[0] / max(result.iterations, 1),
         "alternation_rounds": len(result.alternation),
         "s_per_iteration": result.seconds_per_iteration,
     }
@@ -128,6 +178,8 @@ def main(argv=None) -> int:
     parser.add_argument("--compare-cpu", action="store_true", help="also fit sizes <= 20k on the CPU and compare")
     parser.add_argument("--count-sizes", type=int, nargs="+", default=[5_000, 20_000],
                         help="sizes whose iterations are also counted (a second fit each)")
+    parser.add_argument("--peer-optimizer", type=int, nargs="*", default=[5_000, 20_000],
+                        help="sizes also fitted with torch.optim.LBFGS in the loop (the optimiser before)")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", help="also write the JSON rows here")
     args = parser.parse_args(argv)
@@ -154,18 +206,32 @@ def main(argv=None) -> int:
             row["cpu_iterations"] = cpu["iterations"]
             row["max_surface_difference_vs_cpu"] = _surface_gap(result.surface, cpu["result"].surface, points)
             row["cpu_to_surface_mean"] = _mean_distance(cpu["result"].surface, points, "cpu")
+        row["optimizer"] = "nurbskit L-BFGS"
         rows.append(row)
         print(json.dumps(row), flush=True)
+        if n in args.peer_optimizer:
+            with torch_lbfgs():
+                run = fit_once(points, device)
+                result = run.pop("result")
+                peer = {"points": n, "device": device, "optimizer": "torch.optim.LBFGS", **run,
+                        "to_surface_mean": _mean_distance(result.surface, points, device)}
+                if n in args.count_sizes:
+                    peer.update(count_per_iteration(points, device))
+            rows.append(peer)
+            print(json.dumps(peer), flush=True)
 
     columns = [
-        ("points", "points"), ("seconds", "fit s"), ("iterations", "loop iterations"),
+        ("points", "points"), ("optimizer", "optimizer"), ("seconds", "fit s"), ("cpu_seconds", "CPU s"),
+        ("iterations", "loop iterations"), ("evaluations_per_iteration", "evaluations / iteration"),
         ("alternation_rounds", "alternation rounds"), ("s_per_iteration", "s / iteration"),
         ("ops_per_iteration", "aten ops / iteration"), ("host_reads_per_iteration", "host reads / iteration"),
         ("to_surface_mean", "to-surface mean / diag"), ("max_surface_difference_vs_cpu", "max gap to CPU fit / diag"),
     ]
     notes = ("Default pipeline, float64, smooth patch with 0.1 % noise (bench_fit_goals.py); the fit uses a seeded "
              "random subset of at most 20,000 points (max_points). Ops and host reads per iteration: median over the "
-             "loop iterations after the first, counted in a second fit (torch's L-BFGS line search included).")
+             "loop iterations after the first, counted in a second fit (the L-BFGS line search included). "
+             "torch.optim.LBFGS rows: the same fit with the optimiser the loop used before nurbskit.fit.optim, "
+             "in the same process.")
     if args.skip_1m and any(n >= 1_000_000 for n in args.sizes):
         notes += " The 1M-point size was skipped (--skip-1m)."
     write_results("fit_scale", rows, columns, meta={"device": device, "sizes": sizes},
