@@ -92,8 +92,18 @@ def basis_function_derivatives(knots: Tensor, degree: int, spans: Tensor, u: Ten
     The k-th derivative applies the difference operator ``q (E[r-1] - E[r])`` with
     ``E[r] = G[r] / dens[q][r]`` for ``q = p - k + 1 .. p`` to the degree ``p - k`` values.
     """
+    return window_basis_derivatives(knot_window(knots, degree, spans), degree, u, order)
+
+
+def window_basis_derivatives(K: Tensor, degree: int, u: Tensor, order: int) -> Tensor:
+    """:func:`basis_function_derivatives` from the knot window ``K (..., 2p)`` of
+    :func:`knot_window`: ``u (...)`` -> ``(..., order + 1, p + 1)``.
+
+    The directions of a tensor-product spline with one degree share it: their windows
+    and parameters stacked on a leading axis make one pass of the recurrence for all.
+    """
     p = degree
-    values, dens = _levels(knot_window(knots, p, spans), p, u)
+    values, dens = _levels(K, p, u)
     rows = [values[p]]
     for k in range(1, order + 1):
         if k > p:
