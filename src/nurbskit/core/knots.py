@@ -123,7 +123,20 @@ def validate_knot_vector(knots: Tensor, degree: int, n_ctrl: int, axis: str = ""
             raise NurbskitError(f"{where}{at} has an empty domain [{k[degree]!r}, {k[n_ctrl]!r}]")
 
 
-def find_spans(knots: Tensor, degree: int, n_ctrl: int, u: Tensor) -> Tensor:
+def span_bounds(knots: Tensor, degree: int, n_ctrl: int) -> tuple[Tensor, Tensor]:
+    """The first and last non-empty spans of the domain, ``(1,)`` int64 each (``(*B, 1)``
+    for one knot vector per batch element): usually ``p`` and ``n - 1``, but an unclamped
+    vector may repeat its end knots (``knots[n - 1] == knots[n]``), and then span
+    ``n - 1`` is empty. Found by search on detached knots, so nothing is read back."""
+    k = knots.detach()
+    p, n = degree, n_ctrl
+    first = torch.searchsorted(k, k[..., p : p + 1].contiguous(), right=True) - 1
+    last = torch.searchsorted(k, k[..., n : n + 1].contiguous(), right=False) - 1
+    return first, last
+
+
+def find_spans(knots: Tensor, degree: int, n_ctrl: int, u: Tensor,
+               bounds: tuple[Tensor, Tensor] | None = None) -> Tensor:
     """Span index ``k`` with ``knots[k] <= u < knots[k+1]`` for every entry of ``u``.
 
     Shapes: ``knots (n_ctrl + degree + 1,)``, ``u (...)`` -> ``(...)`` int64; with one knot
@@ -131,23 +144,17 @@ def find_spans(knots: Tensor, degree: int, n_ctrl: int, u: Tensor) -> Tensor:
     Values outside the domain take the first or last non-empty span (polynomial
     extrapolation); the domain end ``knots[n]`` belongs to the last non-empty span.
     The search runs on detached knots (the span is piecewise constant in the knots) and
-    reads nothing back to the host.
+    reads nothing back to the host. ``bounds`` are :func:`span_bounds` of these knots,
+    when the caller keeps them (they depend on the knots alone).
     """
     k = knots.detach()
-    p, n = degree, n_ctrl
-    # The first and last non-empty spans of the domain: usually p and n - 1, but an
-    # unclamped vector may repeat its end knots (knots[n - 1] == knots[n]), and then
-    # span n - 1 is empty. Found by search, so no value is read back to the host.
+    first, last = span_bounds(k, degree, n_ctrl) if bounds is None else bounds
     if k.ndim == 1:
         spans = torch.searchsorted(k, u.detach().contiguous(), right=True) - 1
-        first = torch.searchsorted(k, k[p : p + 1], right=True) - 1
-        last = torch.searchsorted(k, k[n : n + 1], right=False) - 1
         return torch.maximum(torch.minimum(spans, last), first)
     lead = k.shape[:-1]
     flat_u = u.detach().reshape(lead + (-1,)).contiguous()
     spans = torch.searchsorted(k, flat_u, right=True) - 1
-    first = torch.searchsorted(k, k[..., p : p + 1].contiguous(), right=True) - 1
-    last = torch.searchsorted(k, k[..., n : n + 1].contiguous(), right=False) - 1
     return torch.maximum(torch.minimum(spans, last), first).reshape(u.shape)
 
 

@@ -103,64 +103,64 @@ def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor, second_order: bool = 
     return C, f, g, H, J
 
 
-def _solve(A: Tensor, g: Tensor, free: Tensor) -> Tensor:
-    """``-A^{-1} g`` restricted to the free coordinates (fixed ones get 0); k = 1 or 2.
-
-    Shapes: ``A (M, k, k)``, ``g (M, k)``, ``free (M, k)`` bool -> ``(M, k)``. A fixed
-    coordinate's row and column are replaced by the identity, which leaves the reduced
-    Newton system on the free ones (the 1-D Newton along the boundary curve).
-    """
-    g = torch.where(free, g, torch.zeros_like(g))
+def _reduced(A: Tensor, free: Tensor, fill: Tensor) -> list[Tensor]:
+    """The entries ``(M,)`` of ``A (M, k, k)`` (k = 1: ``[a]``; k = 2: ``[a, b, c]``, the
+    matrix ``[[a, b], [b, c]]``) with a fixed coordinate's row and column replaced by
+    ``fill`` on the diagonal and 0 off it: the free block, padded to a full system whose
+    solution is 0 on the fixed coordinates (the 1-D Newton along a boundary curve)."""
+    entries = A.reshape(A.shape[0], -1).unbind(-1)
     if A.shape[-1] == 1:
-        a = torch.where(free[:, 0], A[:, 0, 0], torch.ones_like(A[:, 0, 0]))
-        return -g / a.unsqueeze(-1)
-    f0, f1 = free[:, 0], free[:, 1]
-    one = torch.ones_like(A[:, 0, 0])
-    a = torch.where(f0, A[:, 0, 0], one)
-    c = torch.where(f1, A[:, 1, 1], one)
-    b = torch.where(f0 & f1, A[:, 0, 1], torch.zeros_like(one))
+        return [torch.where(free[:, 0], entries[0], fill)]
+    f0, f1 = free.unbind(-1)
+    return [torch.where(f0, entries[0], fill), torch.where(f0 & f1, entries[1], 0.0), torch.where(f1, entries[3], fill)]
+
+
+def _positive_definite(m: list[Tensor], eps: Tensor) -> Tensor:
+    """Whether the reduced matrix ``m`` (see :func:`_reduced`) is safely positive definite
+    -> ``(M,)``: eigenvalues below about ``eps`` count as not positive."""
+    if len(m) == 1:
+        return m[0] > eps
+    a, b, c = m
+    return (a > eps) & (c > eps) & (a * c - b * b > eps * (a + c))
+
+
+def _solve(m: list[Tensor], g: Tensor) -> Tensor:
+    """``-A^{-1} g`` for the reduced matrix ``m`` and ``g (M, k)`` (0 on fixed coordinates)."""
+    if len(m) == 1:
+        return -g / m[0].unsqueeze(-1)
+    a, b, c = m
+    g0, g1 = g.unbind(-1)
     det = a * c - b * b
-    d0 = -(c * g[:, 0] - b * g[:, 1]) / det
-    d1 = -(a * g[:, 1] - b * g[:, 0]) / det
-    return torch.stack([d0, d1], dim=-1)
-
-
-def _positive_definite(A: Tensor, free: Tensor, scale: Tensor) -> Tensor:
-    """Whether the free block of ``A (M, k, k)`` is safely positive definite -> ``(M,)``.
-
-    ``scale (M,)`` is the size of ``J J^T`` (its trace); eigenvalues below ``1e-10 * scale``
-    count as not positive, so near-singular Hessians take the damped step.
-    """
-    eps = 1e-10 * scale
-    if A.shape[-1] == 1:
-        return ~free[:, 0] | (A[:, 0, 0] > eps)
-    f0, f1 = free[:, 0], free[:, 1]
-    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 1, 1]
-    both = (a > eps) & (c > eps) & (a * c - b * b > eps * (a + c))
-    return torch.where(f0 & f1, both, torch.where(f0, a > eps, torch.where(f1, c > eps, torch.ones_like(both))))
+    return torch.stack([(b * g1 - c * g0) / det, (b * g0 - a * g1) / det], dim=-1)
 
 
 def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
     """One projected (active-set) Newton direction ``(M, k)`` for ``f / 2`` at ``t``.
 
-    Branch-free (no host read): both the direction with the first active set and the one
-    with the blocked parameters held as well are computed, and ``torch.where`` picks.
+    Where the free block of ``H`` is not safely positive definite (eigenvalues below
+    ``1e-10`` of the trace of ``J J^T``), the Levenberg-Marquardt matrix
+    ``J J^T + (1e-3 trace) I`` takes its place: positive definite whenever ``J`` has rank,
+    so the step descends. Branch-free (no host read): both the direction with the first
+    active set and the one with the blocked parameters held as well are computed, and
+    ``torch.where`` picks. The 2 x 2 systems are solved in closed form on their entries.
     """
-    k = t.shape[-1]
     JJ = J @ J.transpose(1, 2)
     trace = JJ.diagonal(dim1=1, dim2=2).sum(-1)
-    # Levenberg-Marquardt matrix: positive definite whenever J has rank, so -A^{-1} g descends.
-    eye = torch.eye(k, dtype=t.dtype, device=t.device)
-    tiny = torch.finfo(t.dtype).tiny
-    lm = JJ + (1e-3 * trace + tiny)[:, None, None] * eye
-
+    eps = 1e-10 * trace
+    damping = 1e-3 * trace + torch.finfo(t.dtype).tiny
+    fill = trace + 1.0  # any positive diagonal for a fixed coordinate: its step is 0
     at_lo, at_hi = t <= lo, t >= hi
     free = ~((at_lo & (g > 0)) | (at_hi & (g < 0)))
 
     def direction(free):
-        pd = _positive_definite(H, free, trace)
-        A = torch.where(pd[:, None, None], H, lm)
-        return _solve(A, g, free)
+        h = _reduced(H, free, fill)
+        lm = _reduced(JJ, free, fill)
+        lm[0] = lm[0] + damping
+        if len(lm) > 1:
+            lm[2] = lm[2] + damping
+        pd = _positive_definite(h, eps)
+        m = [torch.where(pd, x, y) for x, y in zip(h, lm)]
+        return _solve(m, torch.where(free, g, 0.0))
 
     d = direction(free)
     # A Newton step that points out of the domain from an edge is blocked by the clamp and

@@ -50,7 +50,7 @@ from typing import Callable, Sequence
 import torch
 
 from .basis import basis_function_derivatives, basis_functions, basis_matrix, knot_window, window_basis_derivatives
-from .knots import find_spans
+from .knots import find_spans, span_bounds
 
 Tensor = torch.Tensor
 
@@ -222,9 +222,15 @@ def _contract(block: Tensor, bases: Sequence[Tensor]) -> Tensor:
     return X.reshape((M, *orders, block.shape[-1]))
 
 
+def _bounds(kv: Tensor, p: int, n: int) -> tuple[Tensor, Tensor]:
+    """:func:`~nurbskit.core.knots.span_bounds`, cached with the knots (an iterative solver
+    evaluates at new parameters every step, on the same knots)."""
+    return basis_cache.get([kv], ("span bounds", p, n), lambda: span_bounds(kv, p, n))
+
+
 def _span_basis(kv: Tensor, p: int, n: int, u: Tensor, order: int | None) -> tuple[Tensor, Tensor]:
     """Spans ``(...)`` and basis values ``(..., o + 1, p + 1)`` at ``u`` (``o = 0`` for ``order`` None)."""
-    s = find_spans(kv, p, n, u)
+    s = find_spans(kv, p, n, u, _bounds(kv, p, n))
     if order is None:
         return s, basis_functions(kv, p, s, u).unsqueeze(-2)
     return s, basis_function_derivatives(kv, p, s, u, order)
@@ -252,7 +258,8 @@ def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], p
                 return [_span_basis(knot_vectors[a], degrees[a], sizes[a], flat[:, a], order) for a in range(k)]
             # One degree: the directions' knot windows stacked, one pass of the recurrence.
             p = degrees[0]
-            spans = [find_spans(knot_vectors[a], p, sizes[a], flat[:, a]) for a in range(k)]
+            spans = [find_spans(knot_vectors[a], p, sizes[a], flat[:, a], _bounds(knot_vectors[a], p, sizes[a]))
+                     for a in range(k)]
             K = torch.stack([knot_window(knot_vectors[a], p, spans[a]) for a in range(k)])  # (k, M, 2p)
             bases = window_basis_derivatives(K, p, flat.t(), order or 0).unbind(0)
             return list(zip(spans, bases))
