@@ -16,12 +16,18 @@ domain check: one host read); a batch of 64 surfaces of 16 x 16. The "before" co
 the same count on the code before the batch/cache change (commit 97a14e7), measured once
 with this script's cases and kept here as constants.
 
-Usage: python benchmarks/bench_opcount.py [--device cpu|cuda]
+Cases added in the eighth session: forward + backward of a 256^2 sample (control points
+and weights as leaves); ``project_points`` of 1,000 points with its defaults, and warm
+from the last foot points with 2 first-order iterations (what the fit's refresh runs);
+the objective of one fit iteration after the first (refresh, loss, backward).
+
+Usage: python benchmarks/bench_opcount.py [--device cpu|cuda] [--out FILE] [--session-start FILE]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -32,6 +38,10 @@ from _harness import write_results  # noqa: E402
 
 from nurbskit import NURBSSurface  # noqa: E402
 from nurbskit._opcount import OperationCounter  # noqa: E402
+from nurbskit.core.project import project_points  # noqa: E402
+
+# The commit the eighth session started from (its rows: --session-start).
+SESSION_START = "b40661d"
 
 # (operations, host reads) per call on commit 97a14e7, the code before this change.
 BEFORE = {
@@ -63,6 +73,9 @@ def run(device: str) -> list[dict]:
     u = torch.linspace(0, 1, 64, device=device)
     batch_cp = torch.rand(64, 16, 16, 3, generator=g).to(device)
     batch = NURBSSurface(batch_cp, (3, 3), validate=False)
+    points = torch.rand(1000, 3, generator=g).to(device)
+    with torch.no_grad():
+        warm = project_points(checked, points).params  # foot points of the last iteration, as in a fit
     rows = []
     for knots in ("fixed", "trainable"):
         kvs = checked.knot_vectors if knots == "fixed" else [k.clone().requires_grad_() for k in checked.knot_vectors]
@@ -76,6 +89,15 @@ def run(device: str) -> list[dict]:
 
         def checked_moved():
             return moved(True)
+
+        def moved_leaf(kvs=kvs):
+            # control points and weights as the leaves of a fit, knots as above
+            state["step"] += 1
+            P = (cp + state["step"] * 1e-3).requires_grad_()
+            return checked._replace(control_points=P, weights=w.clone().requires_grad_(), knot_vectors=kvs)
+
+        def sample_fwd_bwd(s):
+            s.sample(256).square().sum().backward()
 
         cases = [
             ("sample 64^2", "unchecked", moved, lambda s: s.sample(64)),
@@ -94,6 +116,14 @@ def run(device: str) -> list[dict]:
             cases.append(("batch of 64 (16x16): sample 64^2", "unchecked", batch_moved, lambda s: s.sample(64)))
             cases.append(("batch of 64 (16x16): evaluate 500 shared points", "unchecked", batch_moved,
                           lambda s: s.evaluate(uv)))
+        cases.append(("sample 256^2, forward + backward", "unchecked", moved_leaf, sample_fwd_bwd))
+        if knots == "fixed":
+            cases.append(("project_points 1,000 points (defaults)", "unchecked", moved,
+                          lambda s: project_points(s, points)))
+            cases.append(("project_points 1,000 points, warm: 2 first-order iterations (a fit's refresh)",
+                          "unchecked", moved, lambda s: project_points(
+                              s, points, params=warm, periodic=(False, False), iterations=2, check_every=0,
+                              validate=False, second_order=False)))
         for name, mode, make, call in cases:
             c = count(make, call)
             row = {"call": name, "knots": knots, "object": mode, "operations": c.operations,
@@ -104,22 +134,75 @@ def run(device: str) -> list[dict]:
                 row["operations_before"], row["host_reads_before"] = before
             rows.append(row)
             print(row, flush=True)
+    rows.append(fit_iteration(device))
+    print(rows[-1], flush=True)
     return rows
+
+
+def fit_iteration(device: str) -> dict:
+    """The objective of one iteration of the default refine stage after the first (as in
+    ``tests/test_fit_lstsq.py``): refresh the foot points, the loss, its backward; 2,000
+    points near a 6 x 6 bicubic patch, trainable control points, weights and knots, float64.
+    The optimiser's own operations are in ``bench_fit_scale.py``."""
+    from nurbskit.core import NURBSSurface as Surface
+    from nurbskit.fit.loop import Target, _State, refresh_state, stage_loss
+    from nurbskit.fit.params import SurfaceParameters, Topology
+    from nurbskit.fit.pipelines import get_pipeline
+
+    g = torch.Generator().manual_seed(30)
+    t = torch.linspace(0, 1, 6, dtype=torch.float64)
+    uu, vv = torch.meshgrid(t, t, indexing="ij")
+    cp = torch.stack([uu, vv, 0.2 * torch.rand(6, 6, generator=g, dtype=torch.float64)], -1).to(device)
+    s = Surface(cp, (3, 3))
+    x = s.evaluate(torch.rand(2000, 2, generator=g, dtype=torch.float64).to(device))
+    stage = get_pipeline("default").stages[0]
+    params = SurfaceParameters(s, Topology(), train_weights=True, train_knots=True)
+    target, state = Target(points=x), _State()
+    counts = []
+    for it in range(3):
+        with OperationCounter() as count:
+            refresh_state(params, stage, target, (24, 24), state, it)
+            loss, _ = stage_loss(params, stage, target, (24, 24), state, it)
+            loss.backward()
+        counts.append(count)
+        with torch.no_grad():
+            for p in params.trainable():
+                p.sub_(1e-3 * p.grad)
+                p.grad = None
+    c = counts[-1]
+    return {"call": "fit iteration: refresh + loss + backward (default refine, 2,000 points, float64)",
+            "knots": "trainable", "object": "unchecked", "operations": c.operations, "host_reads": c.host_reads,
+            "host_read_ops": c.host_read_names(), "top_ops": dict(c.by_name.most_common(5))}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    parser.add_argument("--out", help="also write the rows as JSON here")
+    parser.add_argument("--session-start", help="rows of this script run on the session's first commit "
+                        "(its JSON from --out), shown beside")
     args = parser.parse_args()
     rows = run(args.device)
+    if args.out:
+        Path(args.out).write_text(json.dumps(rows, indent=2))
     columns = [("call", "call"), ("knots", "knots"), ("object", "object"), ("operations", "aten ops"),
                ("host_reads", "host reads"), ("operations_before", "aten ops before"),
                ("host_reads_before", "host reads before")]
+    if args.session_start:
+        start = {(r["call"], r["knots"], r["object"]): r for r in json.loads(Path(args.session_start).read_text())}
+        for row in rows:
+            old = start.get((row["call"], row["knots"], row["object"]))
+            if old:
+                row["operations_start"], row["host_reads_start"] = old["operations"], old["host_reads"]
+        columns += [("operations_start", f"aten ops at {SESSION_START}"),
+                    ("host_reads_start", f"host reads at {SESSION_START}")]
     write_results("opcount", rows, columns, meta={"device": args.device},
                   title="Operations and host reads per call (32 x 32 bicubic, float32)",
                   subdir="gpu" if args.device == "cuda" else "",
                   notes="OperationCounter around one call after a first call built the cached basis; "
-                        "control points change before every call. 'before': commit 97a14e7.")
+                        "control points change before every call. 'before': commit 97a14e7. "
+                        f"'at {SESSION_START}': this script on that commit (the eighth session's start), "
+                        "run with --out and read back with --session-start.")
 
 
 if __name__ == "__main__":

@@ -128,8 +128,13 @@ def span_bounds(knots: Tensor, degree: int, n_ctrl: int) -> tuple[Tensor, Tensor
     for one knot vector per batch element): usually ``p`` and ``n - 1``, but an unclamped
     vector may repeat its end knots (``knots[n - 1] == knots[n]``), and then span
     ``n - 1`` is empty. Found by search on detached knots, so nothing is read back."""
-    k = knots.detach()
-    p, n = degree, n_ctrl
+    return _span_bounds(knots.detach(), degree, n_ctrl)
+
+
+def _span_bounds(k: Tensor, p: int, n: int) -> tuple[Tensor, Tensor]:
+    if k.ndim == 1:
+        return (torch.searchsorted(k, k[p : p + 1], right=True) - 1,
+                torch.searchsorted(k, k[n : n + 1], right=False) - 1)
     first = torch.searchsorted(k, k[..., p : p + 1].contiguous(), right=True) - 1
     last = torch.searchsorted(k, k[..., n : n + 1].contiguous(), right=False) - 1
     return first, last
@@ -148,7 +153,7 @@ def find_spans(knots: Tensor, degree: int, n_ctrl: int, u: Tensor,
     when the caller keeps them (they depend on the knots alone).
     """
     k = knots.detach()
-    first, last = span_bounds(k, degree, n_ctrl) if bounds is None else bounds
+    first, last = _span_bounds(k, degree, n_ctrl) if bounds is None else bounds
     if k.ndim == 1:
         spans = torch.searchsorted(k, u.detach().contiguous(), right=True) - 1
         return torch.maximum(torch.minimum(spans, last), first)
