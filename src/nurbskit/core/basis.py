@@ -138,3 +138,16 @@ def basis_matrix(knots: Tensor, degree: int, n_ctrl: int, u: Tensor, order: int 
         -1, columns.unsqueeze(-2).expand(values.shape), values
     )
     return dense.movedim(-2, -3)  # (*, o + 1, M, n_ctrl)
+
+
+def basis_matrices(knots: list[Tensor], degree: int, n_ctrl: int, us: list[Tensor]) -> Tensor:
+    """:func:`basis_matrix` of several directions with one degree and one control count:
+    ``knots[a] (m,)``, ``us[a] (M,)`` -> ``(len(us), M, n_ctrl)``, by one pass of the
+    recurrence on the stacked knot windows (for trainable knots, where nothing is cached
+    and every operation has a backward too)."""
+    spans = torch.stack([find_spans(kv, degree, n_ctrl, u) for kv, u in zip(knots, us)])  # (k, M)
+    K = torch.stack([knot_window(kv, degree, s) for kv, s in zip(knots, spans)])  # (k, M, 2p)
+    u = torch.stack(list(us))
+    values, _ = _levels(K, degree, u)
+    columns = spans.unsqueeze(-1) - degree + torch.arange(degree + 1, device=u.device)
+    return u.new_zeros(u.shape + (n_ctrl,)).scatter(-1, columns, values[degree])

@@ -49,7 +49,8 @@ from typing import Callable, Sequence
 
 import torch
 
-from .basis import basis_function_derivatives, basis_functions, basis_matrix, knot_window, window_basis_derivatives
+from .basis import (basis_function_derivatives, basis_functions, basis_matrices, basis_matrix, knot_window,
+                    window_basis_derivatives)
 from .knots import find_spans, span_bounds
 
 Tensor = torch.Tensor
@@ -423,6 +424,18 @@ def _grid_operators(knot_vectors, degrees, sizes, axes, order: int, D: int, kron
     built differentiably otherwise.
     """
     k = len(degrees)
+    given = [ax for ax in axes if not isinstance(ax, int)]
+    if (order == 0 and k > 1 and len(set(degrees)) == 1 and len(set(sizes)) == 1
+            and all(kv.ndim == 1 for kv in knot_vectors) and all(ax.ndim == 1 for ax in given)
+            and len({ax if isinstance(ax, int) else ax.shape[0] for ax in axes}) == 1
+            and any(t.requires_grad for t in (*knot_vectors, *given))):
+        # Trainable knots or parameters (nothing to cache): one recurrence for all directions.
+        us = [uniform_axis(kv, p, n, ax) if isinstance(ax, int) else ax
+              for kv, p, n, ax in zip(knot_vectors, degrees, sizes, axes)]
+        mats = basis_matrices(list(knot_vectors), degrees[0], sizes[0], us).unbind(0)
+        last = kron_last and D <= _KRON_MAX_CHANNELS
+        tail = _kron_channels(mats[-1], D) if last else mats[-1] if kron_last else mats[-1].transpose(-1, -2)
+        return list(mats[:-1]) + [tail]
     ops = []
     for a in range(k):
         last = kron_last and a == k - 1 and D <= _KRON_MAX_CHANNELS
