@@ -10,8 +10,8 @@ overshot in every iteration and the line search needed a third evaluation to com
 back. :class:`LBFGS` takes its pair ``(s, y)`` from the two ends of its own line
 search instead (Nocedal and Wright, *Numerical Optimization*, 2nd ed., algorithm
 7.5: ``s = x_new - x``, ``y = g(x_new) - g(x)``, one objective), and the unit step is
-then accepted as a rule: on the default fit of 20,000 points, 2 evaluations per
-iteration instead of 3 and 26 iterations instead of 29, to a lower loss
+then accepted as a rule: on the default fit of 20,000 points, 2.1 evaluations per
+iteration instead of 3.1 and 26 iterations instead of 29
 (``benchmarks/results/fit_scale.md``). Where the objective does not change between
 steps the two pairings are the same.
 
@@ -27,7 +27,7 @@ from __future__ import annotations
 from typing import Callable
 
 import torch
-from torch.optim.lbfgs import _strong_wolfe  # torch's own search, the same since torch 1.4
+from torch.optim.lbfgs import _strong_wolfe  # private, but the search stays torch's own
 
 Tensor = torch.Tensor
 
