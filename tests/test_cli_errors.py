@@ -233,8 +233,10 @@ def test_sigterm_during_a_fit_leaves_nothing_behind(tmp_path):
     rng = np.random.default_rng(0)
     uv = rng.random((400, 2))
     np.savetxt(cloud, np.column_stack([uv, np.sin(3 * uv[:, 0]) * uv[:, 1]]))
-    proc = _start(["fit", cloud, "--out", tmp_path / "out", "--iters", "100000", "--quiet", "--no-figures"],
-                  tmp_path)
+    # UCD has no plateau stop, so 100,000 iterations run until the signal (the default
+    # pipeline stops on a plateau: this fit took 6.1 s, about when the signal came).
+    proc = _start(["fit", cloud, "--out", tmp_path / "out", "--pipeline", "UCD", "--iters", "100000", "--quiet",
+                   "--no-figures"], tmp_path)
     time.sleep(6.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=120)
