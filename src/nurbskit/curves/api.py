@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import InputError, OptionError
 
-METHODS = ("classic", "network", "auto")
+METHODS = ("classic", "network", "auto", "hybrid")
 MODES = ("V", "M", "MV")
 COORDINATES = ("pixels: x to the right, y down, origin at the top-left corner of the top-left pixel; "
                "the centre of pixel [row, col] is (col + 0.5, row + 0.5)")
@@ -85,6 +85,8 @@ def extract(grey: np.ndarray, method: str = "classic", mode: str = "MV", toleran
     if method == "classic":
         curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+    if method == "hybrid":
+        return _hybrid(grey, tolerance, iterations, refine_iterations, source)
     from .nets.predict import network_curves
 
     ink, inverted = ink_mask(grey, source)
@@ -99,6 +101,37 @@ def extract(grey: np.ndarray, method: str = "classic", mode: str = "MV", toleran
     if score[1] < score[0]:
         return net, Extraction(ink, inverted, strokes.width, "network", strokes)
     return classic, Extraction(ink, inverted, strokes.width, "classic", strokes)
+
+
+# The hybrid method keeps the classical curves unless the network's vote for another count
+# is stronger by more than this (nats: log P(other) - log P(classical count)).
+HYBRID_SWITCH = 3.0
+
+
+def _hybrid(grey, tolerance, iterations, refine_iterations, source):
+    """The classical path with the MV network's count vote (see :func:`extract`)."""
+    from .classic import fit_image
+    from .classic import refine as refine_curves
+    from .nets.predict import count_probabilities, curves_of_count, redrawn
+
+    vote = {}
+
+    def prior(skeleton):
+        vote["skeleton"], vote["p"] = skeleton, count_probabilities(skeleton, "MV")
+        return vote["p"]
+
+    curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
+                                count_prior=prior)
+    found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+    if "p" not in vote or not 1 <= len(curves) <= len(vote["p"]):
+        return curves, found
+    log_p = np.log(np.maximum(vote["p"], 1e-9))
+    k = int(np.argmax(log_p[:3])) + 1  # the networks were trained on 1 to 3 curves
+    if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_SWITCH:
+        return curves, found
+    net = refine_curves(curves_of_count(redrawn(vote["skeleton"]), k), strokes.ink, refine_iterations)
+    found.chosen = "network"
+    return net, found
 
 
 class Extraction:

@@ -93,3 +93,58 @@ def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -
     unit = predict_unit(model, network_ink(grey, size, inverted))[0]
     h, w = grey.shape
     return to_curves(unit, w, h)
+
+
+# The stroke width (pixels per 128 px of image) of the training drawings (synthetic.mode_config).
+TRAIN_WIDTH = 2.0
+
+
+def redrawn(skeleton: np.ndarray) -> np.ndarray:
+    """A skeleton ``(H, W)`` bool -> grey ``(H, W)`` float64, dark strokes of the training width on white.
+
+    The networks saw strokes of one width only (2 px per 128 px); the counts they read
+    from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's curve
+    count fell from 81 to 55 and 49 %, ``docs/curves.md``). Redrawn from the drawing's
+    skeleton with the training renderer's ramp (``clip(w/2 + 1/2 - d, 0, 1)``, ``d`` the
+    distance to the skeleton by ``scipy.ndimage.distance_transform_edt``), any drawing's
+    strokes look like the training strokes.
+    """
+    from scipy import ndimage
+
+    h, w = skeleton.shape
+    width = TRAIN_WIDTH * (h + w) / 256.0
+    d = ndimage.distance_transform_edt(~skeleton)
+    return 1.0 - np.clip(width / 2 + 0.5 - d, 0.0, 1.0)
+
+
+@torch.no_grad()
+def count_probabilities(skeleton: np.ndarray, mode: str = "MV") -> np.ndarray:
+    """P(1, 2, ..., MAX_CURVES curves) that the shipped ``mode`` network ("M" or "MV") reads
+    in a drawing, from its skeleton ``(H, W)`` bool (redrawn at the training width,
+    :func:`redrawn`) -> ``(MAX_CURVES,)`` float64 summing to 1.
+
+    The curve decoder's stop probabilities ``s_k`` (STOP after curve ``k``) give
+    ``P(k) = s_k * prod_{j < k} (1 - s_j)``, the last step taken as STOP.
+    """
+    if mode not in ("M", "MV"):
+        raise OptionError(f"mode: expected M or MV for a curve count, got {mode!r}")
+    model, meta = load_model(mode)
+    ink = network_ink(redrawn(skeleton), int(meta.get("size", 64)))
+    stops = model(ink, MAX_CURVES)[1] if mode == "M" else model.curve_codes(ink, MAX_CURVES)[2]
+    s = stops.softmax(-1)[0, :, 1].double()
+    s[-1] = 1.0
+    alive = torch.cumprod(torch.cat([s.new_ones(1), 1.0 - s[:-1]]), 0)
+    return (alive * s).numpy()
+
+
+@torch.no_grad()
+def curves_of_count(grey: np.ndarray, count: int, inverted: bool = False) -> list:
+    """The MV network's curves in ``grey (H, W)`` with the number of curves given (its own
+    curve-stop ignored; each curve's point count still from its point-stop), in pixels."""
+    model, meta = load_model("MV")
+    ink = network_ink(grey, int(meta.get("size", 64)), inverted)
+    tokens, codes, _ = model.curve_codes(ink, count)
+    pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
+    n = predicted_count(point_stops, MIN_POINTS)[0]
+    h, w = grey.shape
+    return to_curves([pts[0, i, : int(n[i])].double().numpy() for i in range(count)], w, h)
