@@ -424,7 +424,8 @@ def _min_length(width: float) -> float:
 
 
 def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True,
-                  tolerance: float | None = 1.0, count_prior=None) -> tuple[list[np.ndarray], float]:
+                  tolerance: float | None = 1.0, count_prior=None,
+                  search_extent: float | None = None) -> tuple[list[np.ndarray], float]:
     """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width.
 
     ``simplify=False`` keeps every junction and spur of the skeleton (no merging, no
@@ -435,7 +436,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     frame) and returns the probabilities of 1, 2, ... curves (a network's count vote,
     :func:`nurbskit.curves.nets.predict.count_probabilities`): evidence added to the
     description length of each candidate grouping (see :func:`_fewest_curves`). It is
-    called only when the search runs.
+    called only when the search runs: on drawings whose ink spans at most
+    ``search_extent`` pixels (bounding-box diagonal; default ``_SEARCH_EXTENT``).
     """
     from scipy import ndimage
     from skimage.morphology import skeletonize
@@ -517,7 +519,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     trim = int(np.ceil(width))
     origin = (c0 + 0.5, r0 + 0.5)
     extent = float(np.hypot(*ink.shape))
-    if simplify and tolerance is not None and extent <= _SEARCH_EXTENT:
+    if simplify and tolerance is not None and extent <= (_SEARCH_EXTENT if search_extent is None else search_extent):
         prior = None
         if count_prior is not None:
             full = np.zeros(frame, bool)
@@ -1103,7 +1105,7 @@ def chamfer_points(a: np.ndarray, b: np.ndarray) -> dict:
 
 
 def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source: str = "image",
-              min_length: float | None = None, count_prior=None):
+              min_length: float | None = None, count_prior=None, search_extent: float | None = None):
     """Curves in a drawing by the classical path -> ``(curves, Strokes)``.
 
     Args:
@@ -1115,12 +1117,14 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         count_prior: None, or a callable: skeleton ``(H, W)`` bool -> probabilities of
             1, 2, ... curves, used as evidence when choosing junction pairings (see
             :func:`trace_strokes`).
+        search_extent: the pairing search runs on drawings whose ink spans at most this
+            many pixels (default: 256, see :func:`trace_strokes`).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
-    strokes, width = trace_strokes(ink, tolerance=tolerance, count_prior=count_prior)
+    strokes, width = trace_strokes(ink, tolerance=tolerance, count_prior=count_prior, search_extent=search_extent)
     if min_length is None:
         min_length = _min_length(width)
     if not any(_arc_length(st) >= min_length for st in strokes):

@@ -95,26 +95,41 @@ def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -
     return to_curves(unit, w, h)
 
 
-# The stroke width (pixels per 128 px of image) of the training drawings (synthetic.mode_config).
+# The training drawings' size and stroke width (synthetic.mode_config at 128 px).
+TRAIN_SIZE = 128
 TRAIN_WIDTH = 2.0
 
 
 def redrawn(skeleton: np.ndarray) -> np.ndarray:
-    """A skeleton ``(H, W)`` bool -> grey ``(H, W)`` float64, dark strokes of the training width on white.
+    """A skeleton ``(H, W)`` bool -> grey ``(TRAIN_SIZE, TRAIN_SIZE)`` float64: the drawing
+    as the training drawings look, dark strokes of the training width on white.
 
-    The networks saw strokes of one width only (2 px per 128 px); the counts they read
-    from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's curve
-    count fell from 81 to 55 and 49 %, ``docs/curves.md``). Redrawn from the drawing's
-    skeleton with the training renderer's ramp (``clip(w/2 + 1/2 - d, 0, 1)``, ``d`` the
-    distance to the skeleton by ``scipy.ndimage.distance_transform_edt``), any drawing's
-    strokes look like the training strokes.
+    The networks saw 128 px drawings of one stroke width only (2 px); the counts they read
+    from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's curve count
+    fell from 81 to 55 and 49 %, ``docs/curves.md``). The skeleton's pixel centres, scaled
+    to the training frame, are drawn by the training renderer
+    (:func:`nurbskit.curves.synthetic.render`), so any drawing of any size has the
+    training strokes.
     """
-    from scipy import ndimage
+    from ..synthetic import render
 
     h, w = skeleton.shape
-    width = TRAIN_WIDTH * (h + w) / 256.0
-    d = ndimage.distance_transform_edt(~skeleton)
-    return 1.0 - np.clip(width / 2 + 0.5 - d, 0.0, 1.0)
+    rows, cols = np.nonzero(skeleton)
+    pts = np.stack([(cols + 0.5) * TRAIN_SIZE / w, (rows + 0.5) * TRAIN_SIZE / h], axis=1)
+    if max(h, w) > TRAIN_SIZE:
+        # Rasterised in the training frame and thinned again (skimage's skeletonize), the
+        # skeleton of a drawing of any size is drawn as the 128 px one would be: the
+        # counts follow the amount of ink closely (the same skeleton drawn from dense
+        # points, a bolder line, reads as more curves).
+        from skimage.morphology import skeletonize
+
+        grid = np.zeros((TRAIN_SIZE, TRAIN_SIZE), bool)
+        ij = np.clip(np.floor(pts).astype(int), 0, TRAIN_SIZE - 1)
+        grid[ij[:, 1], ij[:, 0]] = True
+        rows, cols = np.nonzero(skeletonize(grid))
+        pts = np.stack([cols + 0.5, rows + 0.5], axis=1)
+    ink = render([pts], (TRAIN_SIZE, TRAIN_SIZE), TRAIN_WIDTH) if len(pts) else np.zeros((TRAIN_SIZE,) * 2)
+    return 1.0 - ink
 
 
 @torch.no_grad()
@@ -138,13 +153,14 @@ def count_probabilities(skeleton: np.ndarray, mode: str = "MV") -> np.ndarray:
 
 
 @torch.no_grad()
-def curves_of_count(grey: np.ndarray, count: int, inverted: bool = False) -> list:
-    """The MV network's curves in ``grey (H, W)`` with the number of curves given (its own
-    curve-stop ignored; each curve's point count still from its point-stop), in pixels."""
+def curves_of_count(grey: np.ndarray, count: int, shape: tuple[int, int] | None = None) -> list:
+    """The MV network's curves in ``grey (h, w)`` (dark on light) with the number of curves
+    given (its own curve-stop ignored; each curve's point count from its point-stop), in
+    the pixels of an image of ``shape (H, W)`` (default ``grey``'s)."""
     model, meta = load_model("MV")
-    ink = network_ink(grey, int(meta.get("size", 64)), inverted)
+    ink = network_ink(grey, int(meta.get("size", 64)))
     tokens, codes, _ = model.curve_codes(ink, count)
     pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
     n = predicted_count(point_stops, MIN_POINTS)[0]
-    h, w = grey.shape
+    h, w = grey.shape if shape is None else shape
     return to_curves([pts[0, i, : int(n[i])].double().numpy() for i in range(count)], w, h)
