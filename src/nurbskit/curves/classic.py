@@ -18,7 +18,9 @@ Steps (each a library call where one exists):
    Then each junction's pairing is re-chosen for the fewest control points and curves
    that describe the whole strokes (``_fewest_curves``, minimum description length),
    and short edges between nodes of odd degree are tried as shared by two curves (walked
-   twice), kept where the description is shorter.
+   twice), kept where the description is shorter. A vote on the number of curves (the
+   MV network's, ``count_prior``; the ``hybrid`` method of :mod:`nurbskit.curves.api`)
+   adds ``-2 log P(count)`` to the description.
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -670,6 +672,12 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     terms this is a move the per-junction descent cannot make, since it changes the graph
     itself (the Chinese-postman view of covering a graph by few walks that may repeat an
     edge; Edmonds and Johnson, "Matching, Euler tours and the Chinese postman", 1973).
+
+    Count evidence: ``prior`` (the probabilities of 1, 2, ... curves, a network's vote),
+    when given and when the starting pairing reads at most ``_PRIOR_COUNTS`` curves, adds
+    ``-_PRIOR_WEIGHT * ln P(n)`` to every description (``P`` floored at ``_PRIOR_FLOOR``),
+    ``n`` the strokes at least as long as the shortest kept: in the MDL reading, the
+    code length of the count under the network's distribution, scaled to control points.
 
     Returns the new ``partner`` (a copy) and ``tips``; the copies kept are appended to
     ``edges``.
