@@ -121,3 +121,17 @@ def test_the_cli_default_is_the_hybrid_method(tmp_path):
     assert main(["curves", str(src), "--out", str(tmp_path / "out")]) == 0
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["method"] == "hybrid" and report["curves"] == 2
+
+
+def test_without_the_shipped_weights_the_default_is_the_classical_path(monkeypatch):
+    from nurbskit.curves.nets import predict
+    from nurbskit.errors import InputError
+
+    def missing(mode):
+        raise InputError("no shipped weights called 'curves_mv'")
+
+    s = make_sample(300_012, SyntheticConfig(curves=(2, 2), width=1.0))
+    classic, _ = extract(s.image, method="classic")
+    monkeypatch.setattr(predict, "load_model", missing)
+    curves, found = extract(s.image)
+    assert found.chosen == "classic" and len(curves) == len(classic) == 1

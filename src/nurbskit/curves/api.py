@@ -68,8 +68,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       (1-3 curves) by more than ``HYBRID_SWITCH`` nats, the MV network's curves for the
       vote's count, refined by Chamfer against the ink, are returned instead. On drawings
       over 256 px across, where the search does not run by default, the vote is read
-      first and the search run with it only where it disagrees with the count (the
-      network's curves are not used there). Drawings the classical path reads as more
+      first and the search run with it only where it is surer of another count by more
+      than ``HYBRID_LARGE`` nats (the network's curves are not used there). Drawings the classical path reads as more
       than 4 curves (sketches) keep the classical curves: the networks know 1-3.
     * ``"classic"``: :func:`nurbskit.curves.classic.fit_image` (skeleton, strokes, least
       squares), refined by Chamfer against the ink when ``refine``; no network.
@@ -130,8 +130,13 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     """The classical path with the MV network's count vote (see :func:`extract`)."""
     from .classic import _PRIOR_COUNTS, fit_image
     from .classic import refine as refine_curves
-    from .nets.predict import count_probabilities, curves_of_count, redrawn
+    from .nets.predict import count_probabilities, curves_of_count, load_model, redrawn
 
+    try:
+        load_model("MV")
+    except InputError:  # no shipped weights (a stripped install): the classical path alone
+        curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+        return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     vote = {}
 
     def prior(skeleton):
