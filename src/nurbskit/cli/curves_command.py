@@ -41,8 +41,9 @@ def register(subparsers) -> None:
     )
     p.add_argument("image", metavar="IMAGE", help="image file (PNG, JPEG, BMP, TIFF, ...)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--method", choices=("classic", "network", "auto"), default="classic",
-                   help="classic: skeleton, strokes, least squares (default); network: the shipped DeepSpline "
+    p.add_argument("--method", choices=("hybrid", "classic", "network", "auto"), default="hybrid",
+                   help="hybrid: skeleton, strokes, least squares, with the MV network's vote on the number of "
+                        "curves (default); classic: the same without the network; network: the shipped DeepSpline "
                         "network of --mode; auto: both (the network refined), the one closer to the ink kept")
     p.add_argument("--mode", choices=("V", "M", "MV"), default="MV",
                    help="network of --method network: V one curve of 4-6 control points, M 1-3 curves of 5, "
@@ -153,7 +154,7 @@ def run_curves(args) -> int:
         "size": [w, h],
         "method": args.method,
         "chosen": strokes.chosen,
-        "mode": args.mode if args.method == "network" else ("MV" if args.method == "auto" else None),
+        "mode": args.mode if args.method == "network" else ("MV" if args.method in ("auto", "hybrid") else None),
         "tolerance": args.tolerance,
         "refined": bool(args.refine),
         "polarity": "light on dark" if strokes.inverted else "dark on light",

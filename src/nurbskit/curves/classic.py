@@ -18,7 +18,9 @@ Steps (each a library call where one exists):
    Then each junction's pairing is re-chosen for the fewest control points and curves
    that describe the whole strokes (``_fewest_curves``, minimum description length),
    and short edges between nodes of odd degree are tried as shared by two curves (walked
-   twice), kept where the description is shorter.
+   twice), kept where the description is shorter. A vote on the number of curves (the
+   MV network's, ``count_prior``; the ``hybrid`` method of :mod:`nurbskit.curves.api`)
+   adds ``-2 log P(count)`` to the description.
 4. Fit: a cubic B-spline per stroke by least squares on chord-length parameters
    (``nurbskit.core.basis.basis_matrix``), then parameter correction, each parameter
    replaced by its foot point's (``nurbskit.core.project.project_points_curve``),
@@ -424,13 +426,20 @@ def _min_length(width: float) -> float:
 
 
 def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True,
-                  tolerance: float | None = 1.0) -> tuple[list[np.ndarray], float]:
+                  tolerance: float | None = 1.0, count_prior=None,
+                  search_extent: float | None = None) -> tuple[list[np.ndarray], float]:
     """Ink mask ``(H, W)`` bool -> strokes ``[(n_i, 2)]`` of pixel centres (x, y), and the stroke width.
 
     ``simplify=False`` keeps every junction and spur of the skeleton (no merging, no
     pruning): the fallback for blobs whose strokes are as wide as the drawing is long.
     ``tolerance`` (pixels, the fit's) drives the choice of pairings at junctions
     (:func:`_fewest_curves`); None keeps the good-continuation pairing alone.
+    ``count_prior``, when given, is called with the skeleton ``(H, W)`` bool (the ink's
+    frame) and returns the probabilities of 1, 2, ... curves (a network's count vote,
+    :func:`nurbskit.curves.nets.predict.count_probabilities`): evidence added to the
+    description length of each candidate grouping (see :func:`_fewest_curves`). It is
+    called only when the search runs: on drawings whose ink spans at most
+    ``search_extent`` pixels (bounding-box diagonal; default ``_SEARCH_EXTENT``).
     """
     from scipy import ndimage
     from skimage.morphology import skeletonize
@@ -440,6 +449,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     # Work on the ink's bounding box (with a margin): drawings are mostly background.
     rows, cols = np.nonzero(ink)
     r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
+    frame = ink.shape
     ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
     skel = skeletonize(_fill_slivers(ink))
     dt = ndimage.distance_transform_edt(ink)
@@ -511,8 +521,13 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     trim = int(np.ceil(width))
     origin = (c0 + 0.5, r0 + 0.5)
     extent = float(np.hypot(*ink.shape))
-    if simplify and tolerance is not None and extent <= _SEARCH_EXTENT:
-        partner, tips = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent)
+    if simplify and tolerance is not None and extent <= (_SEARCH_EXTENT if search_extent is None else search_extent):
+        prior = None
+        if count_prior is not None:
+            full = np.zeros(frame, bool)
+            full[r0:r0 + skel.shape[0], c0:c0 + skel.shape[1]] = skel
+            prior = np.asarray(count_prior(full), dtype=np.float64)
+        partner, tips = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent, prior)
     out = [pts for pts, _ in _chains(edges, partner, tips, trim, origin)]
     out = _join_broken(out, width)
     return out, width
@@ -531,6 +546,12 @@ _SEARCH_ENDS = 6
 # this many stroke widths, plus as many pixels, are tried as shared by two curves (see
 # _fewest_curves).
 _SHARED = 10.0
+# A network's count vote (see _fewest_curves): -log P(count) in nats times this is added
+# to the description length (control points); probabilities below the floor count as it.
+_PRIOR_WEIGHT = 2.0
+_PRIOR_FLOOR = 1e-3
+# ... only where good continuation alone reads at most this many curves.
+_PRIOR_COUNTS = 4
 # Points per stroke at most when scoring it.
 _SCORE_POINTS = 96
 # Strokes are scored at this many times the fit tolerance, or at this fraction of the
@@ -621,7 +642,7 @@ def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3
 
 
 def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, origin: tuple,
-                   width: float, tolerance: float, extent: float) -> dict:
+                   width: float, tolerance: float, extent: float, prior: np.ndarray | None = None) -> dict:
     """The pairing at each junction re-chosen for the shortest description of the drawing.
 
     Good continuation reads each junction alone and from a few pixels of each branch; a
@@ -651,6 +672,12 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     terms this is a move the per-junction descent cannot make, since it changes the graph
     itself (the Chinese-postman view of covering a graph by few walks that may repeat an
     edge; Edmonds and Johnson, "Matching, Euler tours and the Chinese postman", 1973).
+
+    Count evidence: ``prior`` (the probabilities of 1, 2, ... curves, a network's vote),
+    when given and when the starting pairing reads at most ``_PRIOR_COUNTS`` curves, adds
+    ``-_PRIOR_WEIGHT * ln P(n)`` to every description (``P`` floored at ``_PRIOR_FLOOR``),
+    ``n`` the strokes at least as long as the shortest kept: in the MDL reading, the
+    code length of the count under the network's distribution, scaled to control points.
 
     Returns the new ``partner`` (a copy) and ``tips``; the copies kept are appended to
     ``edges``.
@@ -716,11 +743,23 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     active = set(range(n_edges))
     tips = set(tips)
 
+    evidence = None  # -log P(count) of the count vote, in nats, scaled to control points
+
     def total(p, act=None, tp=None):
-        return sum(stroke_cost(pts, keys) for pts, keys in
-                   _chains(ext, p, tips if tp is None else tp, trim, origin, active if act is None else act))
+        chains = _chains(ext, p, tips if tp is None else tp, trim, origin, active if act is None else act)
+        cost = sum(stroke_cost(pts, keys) for pts, keys in chains)
+        if evidence is not None:
+            n = sum(1 for pts, _ in chains if _arc_length(pts) >= shortest)
+            cost += float(evidence[n - 1]) if 1 <= n <= len(evidence) else -_PRIOR_WEIGHT * np.log(_PRIOR_FLOOR)
+        return cost
 
     partner = dict(partner)
+    if prior is not None and len(prior):
+        # The networks read 1 to 3 curves: on a drawing of many more strokes (a sketch) the
+        # vote says nothing, and its floor would push every drawing towards 5 curves.
+        counted = sum(1 for pts, _ in _chains(ext, partner, tips, trim, origin, active) if _arc_length(pts) >= shortest)
+        if counted <= _PRIOR_COUNTS:
+            evidence = -_PRIOR_WEIGHT * np.log(np.maximum(np.asarray(prior, dtype=np.float64), _PRIOR_FLOOR))
     best = total(partner)
 
     def descend(passes):
@@ -1074,7 +1113,7 @@ def chamfer_points(a: np.ndarray, b: np.ndarray) -> dict:
 
 
 def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source: str = "image",
-              min_length: float | None = None):
+              min_length: float | None = None, count_prior=None, search_extent: float | None = None):
     """Curves in a drawing by the classical path -> ``(curves, Strokes)``.
 
     Args:
@@ -1083,12 +1122,17 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
             2 stroke widths + 4 px, the width taken at most 4 px).
+        count_prior: None, or a callable: skeleton ``(H, W)`` bool -> probabilities of
+            1, 2, ... curves, used as evidence when choosing junction pairings (see
+            :func:`trace_strokes`).
+        search_extent: the pairing search runs on drawings whose ink spans at most this
+            many pixels (default: 256, see :func:`trace_strokes`).
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
     grey = to_grey(image, source)
     ink, inverted = ink_mask(grey, source)
-    strokes, width = trace_strokes(ink, tolerance=tolerance)
+    strokes, width = trace_strokes(ink, tolerance=tolerance, count_prior=count_prior, search_extent=search_extent)
     if min_length is None:
         min_length = _min_length(width)
     if not any(_arc_length(st) >= min_length for st in strokes):

@@ -93,3 +93,74 @@ def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -
     unit = predict_unit(model, network_ink(grey, size, inverted))[0]
     h, w = grey.shape
     return to_curves(unit, w, h)
+
+
+# The training drawings' size and stroke width (synthetic.mode_config at 128 px).
+TRAIN_SIZE = 128
+TRAIN_WIDTH = 2.0
+
+
+def redrawn(skeleton: np.ndarray) -> np.ndarray:
+    """A skeleton ``(H, W)`` bool -> grey ``(TRAIN_SIZE, TRAIN_SIZE)`` float64: the drawing
+    as the training drawings look, dark strokes of the training width on white.
+
+    The networks saw 128 px drawings of one stroke width only (2 px); the counts they read
+    from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's curve count
+    fell from 81 to 55 and 49 %, ``docs/curves.md``). The skeleton's pixel centres, scaled
+    to the training frame, are drawn by the training renderer
+    (:func:`nurbskit.curves.synthetic.render`), so any drawing of any size has the
+    training strokes.
+    """
+    from ..synthetic import render
+
+    h, w = skeleton.shape
+    rows, cols = np.nonzero(skeleton)
+    pts = np.stack([(cols + 0.5) * TRAIN_SIZE / w, (rows + 0.5) * TRAIN_SIZE / h], axis=1)
+    if max(h, w) > TRAIN_SIZE:
+        # Rasterised in the training frame and thinned again (skimage's skeletonize), the
+        # skeleton of a drawing of any size is drawn as the 128 px one would be: the
+        # counts follow the amount of ink closely (the same skeleton drawn from dense
+        # points, a bolder line, reads as more curves).
+        from skimage.morphology import skeletonize
+
+        grid = np.zeros((TRAIN_SIZE, TRAIN_SIZE), bool)
+        ij = np.clip(np.floor(pts).astype(int), 0, TRAIN_SIZE - 1)
+        grid[ij[:, 1], ij[:, 0]] = True
+        rows, cols = np.nonzero(skeletonize(grid))
+        pts = np.stack([cols + 0.5, rows + 0.5], axis=1)
+    ink = render([pts], (TRAIN_SIZE, TRAIN_SIZE), TRAIN_WIDTH) if len(pts) else np.zeros((TRAIN_SIZE,) * 2)
+    return 1.0 - ink
+
+
+@torch.no_grad()
+def count_probabilities(skeleton: np.ndarray, mode: str = "MV") -> np.ndarray:
+    """P(1, 2, ..., MAX_CURVES curves) that the shipped ``mode`` network ("M" or "MV") reads
+    in a drawing, from its skeleton ``(H, W)`` bool (redrawn at the training width,
+    :func:`redrawn`) -> ``(MAX_CURVES,)`` float64 summing to 1.
+
+    The curve decoder's stop probabilities ``s_k`` (STOP after curve ``k``) give
+    ``P(k) = s_k * prod_{j < k} (1 - s_j)``, the last step taken as STOP.
+    """
+    if mode not in ("M", "MV"):
+        raise OptionError(f"mode: expected M or MV for a curve count, got {mode!r}")
+    model, meta = load_model(mode)
+    ink = network_ink(redrawn(skeleton), int(meta.get("size", 64)))
+    stops = model(ink, MAX_CURVES)[1] if mode == "M" else model.curve_codes(ink, MAX_CURVES)[2]
+    s = stops.softmax(-1)[0, :, 1].double()
+    s[-1] = 1.0
+    alive = torch.cumprod(torch.cat([s.new_ones(1), 1.0 - s[:-1]]), 0)
+    return (alive * s).numpy()
+
+
+@torch.no_grad()
+def curves_of_count(grey: np.ndarray, count: int, shape: tuple[int, int] | None = None) -> list:
+    """The MV network's curves in ``grey (h, w)`` (dark on light) with the number of curves
+    given (its own curve-stop ignored; each curve's point count from its point-stop), in
+    the pixels of an image of ``shape (H, W)`` (default ``grey``'s)."""
+    model, meta = load_model("MV")
+    ink = network_ink(grey, int(meta.get("size", 64)))
+    tokens, codes, _ = model.curve_codes(ink, count)
+    pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
+    n = predicted_count(point_stops, MIN_POINTS)[0]
+    h, w = grey.shape if shape is None else shape
+    return to_curves([pts[0, i, : int(n[i])].double().numpy() for i in range(count)], w, h)
