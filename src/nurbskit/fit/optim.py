@@ -11,8 +11,7 @@ back. :class:`LBFGS` takes its pair ``(s, y)`` from the two ends of its own line
 search instead (Nocedal and Wright, *Numerical Optimization*, 2nd ed., algorithm
 7.5: ``s = x_new - x``, ``y = g(x_new) - g(x)``, one objective), and the unit step is
 then accepted as a rule: on the default fit of 20,000 points, 2.1 evaluations per
-iteration instead of 3.1 and 26 iterations instead of 29
-(``benchmarks/results/fit_scale.md``). Where the objective does not change between
+iteration instead of 3.1 (``benchmarks/results/fit_scale.md``). Where the objective does not change between
 steps the two pairings are the same.
 
 The two-loop recursion (algorithm 7.4) runs on 0-dimensional tensors: a pair whose
