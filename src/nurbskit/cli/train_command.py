@@ -64,6 +64,9 @@ def add_training_options(parser, defaults) -> None:
                         help=f"steps between checkpoints (default {defaults.checkpoint_every})")
     parser.add_argument("--threads", type=int_in(1, 256), default=None, metavar="T",
                         help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--init", default=None, metavar="WEIGHTS",
+                        help="start from these weights (a shipped name such as curves_mv, or a weights.pt "
+                             "file of the same network) instead of random ones: a fine-tuning run")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier run's files in --out")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -107,6 +110,8 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     with torch.random.fork_rng(devices=[]):  # the initial weights follow --seed; the global RNG is untouched
         torch.manual_seed(config.seed)
         model = build_model()
+    if getattr(args, "init", None) and not args.resume:
+        meta["init"] = _load_initial_weights(model, args.init)
     try:
         run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,
                     overwrite=args.overwrite, progress=progress, validate=validate)
@@ -118,3 +123,19 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     print(f"{meta.get('name', 'model')}: {run.step} steps in {run.seconds:.1f} s; {shown}")
     print(f"wrote {Path(args.out)}/: checkpoint.pt, weights.pt, history.json, training.png")
     return run
+
+
+def _load_initial_weights(model, name_or_path: str) -> dict:
+    """Load ``--init`` weights into ``model``; returns what the new weights record of them
+    (the command, steps and seconds that made them: a fine-tuned model's full recipe)."""
+    from ..errors import OptionError
+    from ..learn import load_weights
+
+    state, meta = load_weights(name_or_path)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError:
+        raise OptionError(f"--init {name_or_path}: its weights are not those of this network "
+                          f"({meta.get('name', 'unnamed')}, {meta.get('arch')})") from None
+    return {"weights": str(name_or_path), **{k: meta[k] for k in ("name", "command", "steps", "seconds", "init")
+                                             if k in meta}}

@@ -62,7 +62,7 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
     * ``"hybrid"`` (the default): the classical path with the MV network's vote on the
       number of curves as evidence. The vote: :func:`nurbskit.curves.nets.predict.count_probabilities`
       on the drawing's skeleton redrawn as the training drawings are (any stroke width,
-      any size). It enters the junction-pairing search as ``-2 log P(count)`` added to
+      any size), by the MV weights trained on such redrawn drawings (``curves_mv_redrawn``). It enters the junction-pairing search as ``-2 log P(count)`` added to
       the description length (:func:`nurbskit.curves.classic.trace_strokes`,
       ``count_prior``); where the classical count stays less likely than the vote's
       (1-3 curves) by more than ``HYBRID_SWITCH`` nats, the MV network's curves for the
@@ -127,13 +127,14 @@ HYBRID_LARGE = 5.0
 
 
 def _hybrid(grey, tolerance, iterations, refine_iterations, source):
-    """The classical path with the MV network's count vote (see :func:`extract`)."""
+    """The classical path with the MV network's count vote (see :func:`extract`); without the
+    shipped ``curves_mv_redrawn`` weights, the classical path alone."""
     from .classic import _PRIOR_COUNTS, fit_image
     from .classic import refine as refine_curves
     from .nets.predict import count_probabilities, curves_of_count, load_model, redrawn
 
     try:
-        load_model("MV")
+        load_model("MV", "redrawn")
     except InputError:  # no shipped weights (a stripped install): the classical path alone
         curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)

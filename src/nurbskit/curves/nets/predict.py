@@ -25,11 +25,15 @@ from .models import MAX_CURVES, MAX_POINTS, MIN_POINTS, build
 from .train import predicted_count
 
 MODES = ("V", "M", "MV")
+INPUTS = ("image", "redrawn")
 
 
 @functools.lru_cache(maxsize=None)
-def load_model(mode: str):
-    """The shipped network of ``mode`` (``nurbskit/learn/weights/curves_<mode>.pt``), loaded once, in eval mode.
+def load_model(mode: str, input: str = "image"):
+    """The shipped network of ``mode`` trained on ``input`` drawings, loaded once, in eval mode:
+    ``nurbskit/learn/weights/curves_<mode>.pt`` for the drawings themselves,
+    ``curves_<mode>_redrawn.pt`` for their skeletons redrawn (:func:`redrawn`, the hybrid
+    method's reading).
 
     Returns ``(model, meta)``; raises InputError when the weights are not shipped.
     """
@@ -37,7 +41,9 @@ def load_model(mode: str):
 
     if mode not in MODES:
         raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
-    state, meta = load_weights(f"curves_{mode.lower()}")
+    if input not in INPUTS:
+        raise OptionError(f"input: expected one of {', '.join(INPUTS)}, got {input!r}")
+    state, meta = load_weights(f"curves_{mode.lower()}" + ("_redrawn" if input == "redrawn" else ""))
     model = build(mode, meta.get("arch"))
     model.load_state_dict(state)
     model.eval()
@@ -104,46 +110,68 @@ def redrawn(skeleton: np.ndarray) -> np.ndarray:
     """A skeleton ``(H, W)`` bool -> grey ``(TRAIN_SIZE, TRAIN_SIZE)`` float64: the drawing
     as the training drawings look, dark strokes of the training width on white.
 
-    The networks saw 128 px drawings of one stroke width only (2 px); the counts they read
-    from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's curve count
-    fell from 81 to 55 and 49 %, ``docs/curves.md``). The skeleton's pixel centres, scaled
-    to the training frame, are drawn by the training renderer
-    (:func:`nurbskit.curves.synthetic.render`), so any drawing of any size has the
-    training strokes.
+    The curve networks saw 128 px drawings of one stroke width only (2 px); the counts
+    they read from thinner or thicker strokes are much worse (on 1 and 3 px strokes M's
+    curve count fell from 81 to 55 and 49 %, ``docs/curves.md``). The skeleton's pixel
+    centres, scaled to the training frame, are drawn by the training renderer
+    (:func:`nurbskit.curves.synthetic.render_batch`), so any drawing of any size has the
+    training strokes. The count network is trained on these very images
+    (:func:`~.train.count_batch_maker`).
     """
-    from ..synthetic import render
+    return redrawn_points([skeleton_points(skeleton)])[0]
 
+
+def skeleton_points(skeleton: np.ndarray) -> np.ndarray:
+    """A skeleton ``(H, W)`` bool -> its pixel centres ``(N, 2)`` scaled to the training frame.
+
+    Over ``TRAIN_SIZE`` px across, the points are rasterised in the training frame and
+    thinned again (:func:`thinned`): the skeleton of a drawing of any size is drawn as the
+    128 px one would be (the counts follow the amount of ink closely: the same skeleton
+    drawn from dense points, a bolder line, reads as more curves).
+    """
     h, w = skeleton.shape
     rows, cols = np.nonzero(skeleton)
     pts = np.stack([(cols + 0.5) * TRAIN_SIZE / w, (rows + 0.5) * TRAIN_SIZE / h], axis=1)
-    if max(h, w) > TRAIN_SIZE:
-        # Rasterised in the training frame and thinned again (skimage's skeletonize), the
-        # skeleton of a drawing of any size is drawn as the 128 px one would be: the
-        # counts follow the amount of ink closely (the same skeleton drawn from dense
-        # points, a bolder line, reads as more curves).
-        from skimage.morphology import skeletonize
+    return thinned(pts) if max(h, w) > TRAIN_SIZE else pts
 
-        grid = np.zeros((TRAIN_SIZE, TRAIN_SIZE), bool)
-        ij = np.clip(np.floor(pts).astype(int), 0, TRAIN_SIZE - 1)
-        grid[ij[:, 1], ij[:, 0]] = True
-        rows, cols = np.nonzero(skeletonize(grid))
-        pts = np.stack([cols + 0.5, rows + 0.5], axis=1)
-    ink = render([pts], (TRAIN_SIZE, TRAIN_SIZE), TRAIN_WIDTH) if len(pts) else np.zeros((TRAIN_SIZE,) * 2)
-    return 1.0 - ink
+
+def thinned(points: np.ndarray) -> np.ndarray:
+    """Dense points ``(N, 2)`` in the training frame -> the pixel centres of their one-pixel
+    skeleton there (skimage's ``skeletonize`` of the pixels they fall in)."""
+    from skimage.morphology import skeletonize
+
+    grid = np.zeros((TRAIN_SIZE, TRAIN_SIZE), bool)
+    ij = np.clip(np.floor(points).astype(int), 0, TRAIN_SIZE - 1)
+    grid[ij[:, 1], ij[:, 0]] = True
+    rows, cols = np.nonzero(skeletonize(grid))
+    return np.stack([cols + 0.5, rows + 0.5], axis=1)
+
+
+def redrawn_points(points: list[np.ndarray]) -> np.ndarray:
+    """Points in the training frame, one ``(N_i, 2)`` array per drawing -> grey
+    ``(len, TRAIN_SIZE, TRAIN_SIZE)`` float64: strokes of the training width through them, on white."""
+    from ..synthetic import render_batch
+
+    pts = [torch.as_tensor(p, dtype=torch.float64).reshape(-1, 2) for p in points]
+    owner = torch.repeat_interleave(torch.arange(len(pts)), torch.tensor([len(p) for p in pts], dtype=torch.long))
+    ink = render_batch(torch.cat(pts), owner, len(pts), (TRAIN_SIZE, TRAIN_SIZE), TRAIN_WIDTH)
+    return 1.0 - ink.numpy()
 
 
 @torch.no_grad()
-def count_probabilities(skeleton: np.ndarray, mode: str = "MV") -> np.ndarray:
-    """P(1, 2, ..., MAX_CURVES curves) that the shipped ``mode`` network ("M" or "MV") reads
+def count_probabilities(skeleton: np.ndarray, mode: str = "MV", input: str = "redrawn") -> np.ndarray:
+    """P(1, 2, ..., MAX_CURVES curves) that a shipped ``mode`` network ("M" or "MV") reads
     in a drawing, from its skeleton ``(H, W)`` bool (redrawn at the training width,
     :func:`redrawn`) -> ``(MAX_CURVES,)`` float64 summing to 1.
 
-    The curve decoder's stop probabilities ``s_k`` (STOP after curve ``k``) give
+    ``input``: which weights read it: ``"redrawn"`` (the default; trained on redrawn
+    skeletons, ``nurbskit train curves --input redrawn``) or ``"image"``. The curve
+    decoder's stop probabilities ``s_k`` (STOP after curve ``k``) give
     ``P(k) = s_k * prod_{j < k} (1 - s_j)``, the last step taken as STOP.
     """
     if mode not in ("M", "MV"):
         raise OptionError(f"mode: expected M or MV for a curve count, got {mode!r}")
-    model, meta = load_model(mode)
+    model, meta = load_model(mode, input)
     ink = network_ink(redrawn(skeleton), int(meta.get("size", 64)))
     stops = model(ink, MAX_CURVES)[1] if mode == "M" else model.curve_codes(ink, MAX_CURVES)[2]
     s = stops.softmax(-1)[0, :, 1].double()
@@ -153,11 +181,13 @@ def count_probabilities(skeleton: np.ndarray, mode: str = "MV") -> np.ndarray:
 
 
 @torch.no_grad()
-def curves_of_count(grey: np.ndarray, count: int, shape: tuple[int, int] | None = None) -> list:
+def curves_of_count(grey: np.ndarray, count: int, shape: tuple[int, int] | None = None,
+                    input: str = "redrawn") -> list:
     """The MV network's curves in ``grey (h, w)`` (dark on light) with the number of curves
     given (its own curve-stop ignored; each curve's point count from its point-stop), in
-    the pixels of an image of ``shape (H, W)`` (default ``grey``'s)."""
-    model, meta = load_model("MV")
+    the pixels of an image of ``shape (H, W)`` (default ``grey``'s); ``input`` as in
+    :func:`count_probabilities` (the default reads a :func:`redrawn` drawing)."""
+    model, meta = load_model("MV", input)
     ink = network_ink(grey, int(meta.get("size", 64)))
     tokens, codes, _ = model.curve_codes(ink, count)
     pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
