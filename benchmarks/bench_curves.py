@@ -1,7 +1,8 @@
 """Curves from images by the default method (issue 10): synthetic drawn splines and MNIST digits.
 
 Question: how close are the curves ``nurbskit.curves_from_image()`` (the default method,
-``hybrid``: the classical path with the MV network's vote on the number of curves) reads
+``hybrid``: the classical path with the MV network's vote on the number of curves, by the
+weights trained on redrawn skeletons, ``curves_mv_redrawn``) reads
 from drawings, to the true curves (synthetic) and to the ink (MNIST), how often is the
 number of curves right, and how long does one image take?
 
@@ -47,8 +48,8 @@ The issue's goals for the default method: <= 1 px for one curve and <= 1.5 px fo
 three, >= 90 % right counts, <= 2 px at 512 x 512, <= 2.5 px on MNIST to the ink; <= 300
 ms for a 512 x 512 drawing. The issue's test set is 2,000 images per mode; the default
 method is run on ``--count`` (default 300) per row here, the shared 2-core machine being
-heavily loaded. The counts before (``BEFORE``) are the classical path's, the default
-until commit b40661d, on the same seeds (that path is unchanged: ``method="classic"``).
+heavily loaded. The counts before (``BEFORE``) are the default method's at commit 8ce2358
+(the count vote by the MV weights trained on the drawings themselves), on the same seeds.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_curves.py [--count 300] [--large 300] [--refined 100] [--mnist 300]``.
 """
@@ -99,11 +100,13 @@ def upsample(image: np.ndarray, factor: int) -> np.ndarray:
 
 
 # The count accuracy measured before this session's changes (same seeds and sizes, 300
-# images per row; benchmarks/results/curves.md at that commit): the classical path, then
-# the default method.
-BEFORE_COMMIT = "b40661d, classic"
-BEFORE = {(128, 1): 96.7, (128, 2): 81.7, (128, 3): 66.0, (128, "1-3"): 81.4,
-          (512, 1): 97.0, (512, 2): 87.3, (512, 3): 66.3, (512, "1-3"): 83.6}
+# images per row; benchmarks/results/curves.md at that commit): the default method, hybrid,
+# with the vote of the MV weights trained on the drawings themselves. (The classical path
+# alone, the default until b40661d: 96.7 / 81.7 / 66.0 %, pooled 81.4 % at 128 px; 97.0 /
+# 87.3 / 66.3 %, pooled 83.6 % at 512 px.)
+BEFORE_COMMIT = "8ce2358, hybrid, image MV vote"
+BEFORE = {(128, 1): 95.0, (128, 2): 85.3, (128, 3): 82.7, (128, "1-3"): 87.7,
+          (512, 1): 96.7, (512, 2): 89.0, (512, 3): 81.3, (512, "1-3"): 89.0}
 
 # Failure classes, read off the true curves (not the drawing): how a count can go wrong.
 CLASSES = ("self-crossing", "end on another curve", "sharp turn", "plain")

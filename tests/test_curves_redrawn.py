@@ -15,7 +15,7 @@ import torch
 from _cli import one_line, run
 from nurbskit.curves.classic import fit_image
 from nurbskit.curves.nets.predict import count_probabilities, load_model, network_ink, redrawn
-from nurbskit.curves.nets.train import LOSSES, batch_maker, network_inputs, redrawn_batch_maker
+from nurbskit.curves.nets.train import LOSSES, TRAIN_SPACING, batch_maker, network_inputs, redrawn_batch_maker
 from nurbskit.curves.synthetic import SyntheticConfig, make_sample, make_torch_batch, mode_config
 from nurbskit.learn import batch_generator, load_weights, shipped_weights
 
@@ -24,7 +24,7 @@ def test_training_drawings_are_the_recipes_area_averaged_to_the_network():
     # Drawn at 128 px with 2 px strokes, then area-averaged to 64 px: the benchmark's and
     # the network method's input, not a 64 px drawing with 1 px strokes.
     ink, unit, counts, n_curves = batch_maker("MV", 64)(batch_generator(4, 0), 5)
-    batch = make_torch_batch(batch_generator(4, 0), 5, mode_config("MV", 128), spacing=0.5)
+    batch = make_torch_batch(batch_generator(4, 0), 5, mode_config("MV", 128), spacing=TRAIN_SPACING)
     expected, expected_unit = network_inputs(batch, 64)
     assert ink.shape == (5, 1, 64, 64)
     assert torch.equal(ink, expected) and torch.equal(unit, expected_unit)
@@ -44,7 +44,7 @@ def test_redrawn_training_drawings_are_what_the_hybrid_method_reads():
     g = batch_generator(5, 0)
     width = 1.0 + 2.0 * float(torch.rand((), generator=g, dtype=torch.float64))
     torch.rand(6, generator=g)
-    batch = make_torch_batch(g, 6, mode_config("MV", 128, width=width), spacing=0.5)
+    batch = make_torch_batch(g, 6, mode_config("MV", 128, width=width), spacing=TRAIN_SPACING)
     assert torch.equal(batch.n_curves, n_curves) and torch.equal(batch.counts, counts)
     assert torch.equal(unit, (batch.points / 128).float())
     for b in range(6):
