@@ -110,7 +110,7 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     with torch.random.fork_rng(devices=[]):  # the initial weights follow --seed; the global RNG is untouched
         torch.manual_seed(config.seed)
         model = build_model()
-    if getattr(args, "init", None) and not args.resume:
+    if getattr(args, "init", None):  # on --resume the checkpoint's weights replace these; the record stays
         meta["init"] = _load_initial_weights(model, args.init)
     try:
         run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,

@@ -115,8 +115,8 @@ def redrawn(skeleton: np.ndarray) -> np.ndarray:
     curve count fell from 81 to 55 and 49 %, ``docs/curves.md``). The skeleton's pixel
     centres, scaled to the training frame, are drawn by the training renderer
     (:func:`nurbskit.curves.synthetic.render_batch`), so any drawing of any size has the
-    training strokes. The count network is trained on these very images
-    (:func:`~.train.count_batch_maker`).
+    training strokes. The MV weights that vote for the hybrid method are trained on these
+    very images (``curves_mv_redrawn``, :func:`~.train.redrawn_batch_maker`).
     """
     return redrawn_points([skeleton_points(skeleton)])[0]
 
