@@ -62,8 +62,9 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
     * ``"hybrid"`` (the default): the classical path with the MV network's vote on the
       number of curves as evidence. The vote: :func:`nurbskit.curves.nets.predict.count_probabilities`
       on the drawing's skeleton redrawn as the training drawings are (any stroke width,
-      any size), by the MV weights trained on such redrawn drawings (``curves_mv_redrawn``). It enters the junction-pairing search as ``-2 log P(count)`` added to
-      the description length (:func:`nurbskit.curves.classic.trace_strokes`,
+      any size), by the MV weights trained on such redrawn drawings
+      (``curves_mv_redrawn``). It enters the junction-pairing search as
+      ``-2 log P(count)`` added to the description length (:func:`nurbskit.curves.classic.trace_strokes`,
       ``count_prior``); where the classical count stays less likely than the vote's
       (1-3 curves) by more than ``HYBRID_SWITCH`` nats, the MV network's curves for the
       vote's count, refined by Chamfer against the ink, are returned instead. On drawings
