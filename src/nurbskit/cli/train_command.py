@@ -94,6 +94,11 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
         torch.set_num_threads(args.threads)
     meta = dict(meta, command="nurbskit " + " ".join(shlex.quote(a) for a in sys.argv[1:] if a != "--quiet"),
                 torch=str(torch.__version__))  # TorchVersion is not plain data: weights_only loads refuse it
+    with torch.random.fork_rng(devices=[]):  # the initial weights follow --seed; the global RNG is untouched
+        torch.manual_seed(config.seed)
+        model = build_model()
+    if getattr(args, "init", None):  # on --resume the checkpoint's weights replace these; the record stays
+        meta["init"] = _load_initial_weights(model, args.init)
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -107,11 +112,6 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
             bar.set_postfix_str(f"loss={values['loss']:.3e}", refresh=False)
             bar.update(0)
 
-    with torch.random.fork_rng(devices=[]):  # the initial weights follow --seed; the global RNG is untouched
-        torch.manual_seed(config.seed)
-        model = build_model()
-    if getattr(args, "init", None):  # on --resume the checkpoint's weights replace these; the record stays
-        meta["init"] = _load_initial_weights(model, args.init)
     try:
         run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,
                     overwrite=args.overwrite, progress=progress, validate=validate)
