@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import write_results  # noqa: E402
 
 from nurbskit import NURBSSurface  # noqa: E402
-from nurbskit._opcount import OperationCounter  # noqa: E402
+from nurbskit._opcount import OperationCounter, count_fit_iterations  # noqa: E402
 from nurbskit.core.project import project_points  # noqa: E402
 
 # The commit the eighth session started from (its rows: --session-start).
@@ -145,7 +145,7 @@ def fit_iteration(device: str) -> dict:
     points near a 6 x 6 bicubic patch, trainable control points, weights and knots, float64.
     The optimiser's own operations are in ``bench_fit_scale.py``."""
     from nurbskit.core import NURBSSurface as Surface
-    from nurbskit.fit.loop import Target, _State, refresh_state, stage_loss
+    from nurbskit.fit.loop import Target
     from nurbskit.fit.params import SurfaceParameters, Topology
     from nurbskit.fit.pipelines import get_pipeline
 
@@ -157,18 +157,7 @@ def fit_iteration(device: str) -> dict:
     x = s.evaluate(torch.rand(2000, 2, generator=g, dtype=torch.float64).to(device))
     stage = get_pipeline("default").stages[0]
     params = SurfaceParameters(s, Topology(), train_weights=True, train_knots=True)
-    target, state = Target(points=x), _State()
-    counts = []
-    for it in range(3):
-        with OperationCounter() as count:
-            refresh_state(params, stage, target, (24, 24), state, it)
-            loss, _ = stage_loss(params, stage, target, (24, 24), state, it)
-            loss.backward()
-        counts.append(count)
-        with torch.no_grad():
-            for p in params.trainable():
-                p.sub_(1e-3 * p.grad)
-                p.grad = None
+    counts, _ = count_fit_iterations(params, stage, Target(points=x), (24, 24))
     c = counts[-1]
     return {"call": "fit iteration: refresh + loss + backward (default refine, 2,000 points, float64)",
             "knots": "trainable", "object": "unchecked", "operations": c.operations, "host_reads": c.host_reads,

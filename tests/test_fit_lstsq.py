@@ -234,26 +234,15 @@ def test_a_fit_iteration_after_the_first_reads_nothing_back():
     # warm, point-to-surface + coverage + smoothness, backward) under the operation
     # counter: no .item(), no bool(tensor), no nonzero. (torch's L-BFGS reads its own
     # scalars in the line search; that is the optimiser's, not the objective's.)
-    from nurbskit._opcount import OperationCounter
-    from nurbskit.fit.loop import Target, _State, refresh_state, stage_loss
+    from nurbskit._opcount import count_fit_iterations
+    from nurbskit.fit.loop import Target
     from nurbskit.fit.pipelines import get_pipeline
 
     stage = get_pipeline("default").stages[0]
     s = _gentle_surface(6, seed=30)
     x = s.evaluate(torch.rand(500, 2, generator=_gen(31), dtype=F64)) + 0.002 * torch.randn(500, 3, generator=_gen(32), dtype=F64)
     params = SurfaceParameters(s, Topology(), train_weights=True, train_knots=True)
-    target, state = Target(points=x), _State()
-    counts = []
-    for it in range(3):
-        with OperationCounter() as count:
-            refresh_state(params, stage, target, (24, 24), state, it)
-            loss, parts = stage_loss(params, stage, target, (24, 24), state, it)
-            loss.backward()
-        counts.append(count)
-        with torch.no_grad():
-            for t in params.trainable():
-                t.sub_(1e-3 * t.grad)
-                t.grad = None
+    counts, parts = count_fit_iterations(params, stage, Target(points=x), (24, 24))
     assert counts[0].host_reads > 0  # the first iteration projects from the grid
     for c in counts[1:]:
         assert c.host_reads == 0, c.host_read_names()

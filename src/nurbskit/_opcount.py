@@ -110,3 +110,30 @@ def count_operations(fn, *args, **kwargs) -> tuple[object, OperationCounter]:
     with OperationCounter() as counter:
         result = fn(*args, **kwargs)
     return result, counter
+
+
+def count_fit_iterations(params, stage, target, grid: tuple[int, int], iterations: int = 3,
+                         step: float = 1e-3) -> tuple[list[OperationCounter], dict]:
+    """Count ``iterations`` iterations of the fitting loop's objective, one counter each.
+
+    Each iteration is what :func:`nurbskit.fit.loop.run_stage` does per step before its
+    optimiser: the foot-point refresh (:func:`~nurbskit.fit.loop.refresh_state`), the loss
+    (:func:`~nurbskit.fit.loop.stage_loss`) and its backward pass; a plain gradient step
+    of size ``step`` then moves the parameters (outside the count), so every iteration
+    after the first refreshes from moved ones. Returns the counters and the last loss's
+    parts.
+    """
+    from .fit.loop import _State, refresh_state, stage_loss
+
+    state, counts, parts = _State(), [], {}
+    for it in range(iterations):
+        with OperationCounter() as count:
+            refresh_state(params, stage, target, grid, state, it)
+            loss, parts = stage_loss(params, stage, target, grid, state, it)
+            loss.backward()
+        counts.append(count)
+        with torch.no_grad():
+            for p in params.trainable():
+                p.sub_(step * p.grad)
+                p.grad = None
+    return counts, parts
