@@ -65,23 +65,122 @@ def network_ink(grey: np.ndarray, size: int, inverted: bool = False) -> torch.Te
     return ink.clamp(0.0, 1.0)
 
 
-@torch.no_grad()
-def predict_unit(model, ink: torch.Tensor) -> list[list[np.ndarray]]:
-    """Control points in the unit square: ink ``(B, 1, S, S)`` -> per image, one ``(n_i, 2)`` array per curve."""
-    mode = model.mode
-    if mode == "V":
+#: The views of a drawing whose readings :func:`read_views` averages (``views=4``), as
+#: (flip x, flip y): the drawing, flipped top to bottom, flipped left to right, turned
+#: half a turn. Each keeps the canonical orientation (first control point left of the
+#: last) once its points are mapped back, a flip in x reversing every point sequence.
+VIEWS = ((False, False), (False, True), (True, False), (True, True))
+
+
+def _raw(model, ink: torch.Tensor):
+    """One reading in the common layout: points ``(B, K, T, 2)``, point-stop log-probabilities
+    ``(B, K, T, 2)`` (None: a fixed count) and curve-stop log-probabilities ``(B, K, 2)``
+    (None: one curve)."""
+    if model.mode == "V":
         pts, stops = model(ink, MAX_POINTS)
-        n = predicted_count(stops, MIN_POINTS)
-        return [[pts[b, : int(n[b])].double().numpy()] for b in range(len(n))]
-    if mode == "M":
+        return pts[:, None], stops.log_softmax(-1)[:, None], None
+    if model.mode == "M":
         pts, stops = model(ink, MAX_CURVES)
-        k = predicted_count(stops)
-        return [[pts[b, i].double().numpy() for i in range(int(k[b]))] for b in range(len(k))]
+        return pts, None, stops.log_softmax(-1)
     tokens, codes, curve_stops = model.curve_codes(ink, MAX_CURVES)
-    k = predicted_count(curve_stops)
     pts, point_stops = model.decode_points(tokens, codes, MAX_POINTS)
-    n = predicted_count(point_stops, MIN_POINTS)
-    return [[pts[b, i, : int(n[b, i])].double().numpy() for i in range(int(k[b]))] for b in range(len(k))]
+    return pts, point_stops.log_softmax(-1), curve_stops.log_softmax(-1)
+
+
+def _point_counts(point_logp, shape) -> torch.Tensor:
+    """Points per curve ``(B, K)``: from the point stops, or all ``T`` for a fixed count."""
+    if point_logp is None:
+        return torch.full(shape[:2], shape[2], dtype=torch.long)
+    return predicted_count(point_logp, MIN_POINTS)
+
+
+def _unview(points: torch.Tensor, counts: torch.Tensor, flip_x: bool, flip_y: bool) -> torch.Tensor:
+    """Points ``(B, K, T, 2)`` read in a flipped view -> the drawing's own frame; a flip in x
+    also reverses the first ``counts (B, K)`` points of each sequence."""
+    p = points.clone()
+    if flip_y:
+        p[..., 1] = 1.0 - p[..., 1]
+    if flip_x:
+        p[..., 0] = 1.0 - p[..., 0]
+        i = torch.arange(p.shape[-2])
+        c = counts[..., None]
+        order = torch.where(i < c, c - 1 - i, i)
+        p = p.gather(-2, order[..., None].expand(p.shape))
+    return p
+
+
+def _match_cost(a: torch.Tensor, na: torch.Tensor, b: torch.Tensor, nb: torch.Tensor) -> torch.Tensor:
+    """How far apart the curves of two readings are: ``(B, K, K)`` from points ``(B, K, T, 2)``
+    and counts ``(B, K)``: squared distances of the first points, the last points and the
+    centroids of the control polygons."""
+
+    def summary(p, n):
+        i = torch.arange(p.shape[-2])
+        mask = (i < n[..., None]).to(p.dtype)[..., None]
+        last = p.gather(-2, (n - 1)[..., None, None].expand(*n.shape, 1, 2))[..., 0, :]
+        return torch.stack([p[..., 0, :], last, (p * mask).sum(-2) / mask.sum(-2)], -2)  # (B, K, 3, 2)
+
+    sa, sb = summary(a, na), summary(b, nb)
+    return ((sa[:, :, None] - sb[:, None]) ** 2).sum((-1, -2))
+
+
+@torch.no_grad()
+def read_views(model, ink: torch.Tensor, views: int = 1, counts: torch.Tensor | None = None):
+    """A network's reading of ink ``(B, 1, S, S)``, from one view or averaged over four.
+
+    Returns ``(points (B, K, T, 2), curves (B,), counts (B, K))``: control points in the
+    unit square (the first ``counts[b, c]`` of curve ``c < curves[b]`` are the curve's).
+    ``views`` 1 reads the drawing once. ``views`` 4 reads the four :data:`VIEWS` in one
+    batch and averages them: the stop log-probabilities of the curves (their count), each
+    view's curves matched to the first view's (Hungarian, on the first and last control
+    points and the polygon's centroid), the matched curves' point-stop log-probabilities
+    (each curve's count), and their control points mapped back for that count. A
+    recurrent decoder's error grows along the sequence it emits; a view flipped in x emits
+    it backwards, so the average gains most at the ends. ``counts (B, K)``, when given,
+    replaces the point counts read (the benchmark's "decoded for the true number of
+    points").
+    """
+    from .train import hungarian
+
+    if views not in (1, len(VIEWS)):
+        raise OptionError(f"views: expected 1 or {len(VIEWS)}, got {views!r}")
+    b = ink.shape[0]
+    flips = VIEWS[:views]
+    stacked = torch.cat([ink.flip([d for d, f in ((-1, fx), (-2, fy)) if f]) if fx or fy else ink for fx, fy in flips])
+    pts, point_logp, curve_logp = _raw(model, stacked)
+    pts = pts.view(views, b, *pts.shape[1:])
+    point_logp = None if point_logp is None else point_logp.view(views, b, *point_logp.shape[1:])
+    k = (torch.ones(b, dtype=torch.long) if curve_logp is None
+         else predicted_count(curve_logp.view(views, b, *curve_logp.shape[1:]).mean(0)))
+    own = [_point_counts(None if point_logp is None else point_logp[j], pts[j].shape) for j in range(views)]
+    ref = _unview(pts[0], own[0], *flips[0])
+    matched_pts, matched_logp = [pts[0]], [None if point_logp is None else point_logp[0]]
+    for j in range(1, views):
+        perm = hungarian(_match_cost(ref, own[0], _unview(pts[j], own[j], *flips[j]), own[j]), k)  # (B, K)
+        matched_pts.append(pts[j].gather(1, perm[..., None, None].expand(pts[j].shape)))
+        if point_logp is not None:
+            matched_logp.append(point_logp[j].gather(1, perm[..., None, None].expand(point_logp[j].shape)))
+    n = _point_counts(None if point_logp is None else torch.stack(matched_logp).mean(0), pts[0].shape)
+    if counts is not None:
+        n = counts
+    mean = torch.stack([_unview(p, n, *f) for p, f in zip(matched_pts, flips)]).mean(0)
+    return mean, k, n
+
+
+#: Views read by default, per mode (measured on 500 held-out drawings, 128 px: averaging
+#: four views lowers V's mean Chamfer to the true curve from 3.70 to 3.50 px and its
+#: point-count errors from 19.0 to 17.2 %; for M and MV it moves the count by under one
+#: point and raises the Chamfer by 2-3 %, so they read once).
+DEFAULT_VIEWS = {"V": 4, "M": 1, "MV": 1}
+
+
+def predict_unit(model, ink: torch.Tensor, views: int | None = None) -> list[list[np.ndarray]]:
+    """Control points in the unit square: ink ``(B, 1, S, S)`` -> per image, one ``(n_i, 2)`` array per curve.
+
+    ``views``: 1 or 4 (:func:`read_views`); default :data:`DEFAULT_VIEWS` of the model's mode.
+    """
+    points, k, n = read_views(model, ink, DEFAULT_VIEWS[model.mode] if views is None else views)
+    return [[points[i, c, : int(n[i, c])].double().numpy() for c in range(int(k[i]))] for i in range(len(k))]
 
 
 def to_curves(unit: list[np.ndarray], width: int, height: int) -> list:
