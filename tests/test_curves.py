@@ -7,7 +7,7 @@ import pytest
 
 import nurbskit
 from nurbskit.curves.classic import chamfer_points, chamfer_to_ink, fit_image, fit_stroke, ink_mask, to_grey
-from nurbskit.curves.synthetic import SyntheticConfig, curve_of, dense_samples, make_sample, render
+from nurbskit.curves.synthetic import SyntheticConfig, curve_of, dense_samples, make_sample, photograph, render
 from nurbskit.errors import InputError, OptionError
 
 from _assert import assert_close
@@ -158,3 +158,48 @@ def test_a_t_junction_gives_a_bar_and_a_stem():
     lengths = sorted(np.linalg.norm(np.diff(dense_samples(c), axis=0), axis=1).sum() for c in curves)
     assert lengths[1] > 100  # the bar is one stroke, not split at the stem
     assert _symmetric(curves, [bar, stem]) < 1.0
+
+
+def _iou(a, b):
+    return (a & b).sum() / (a | b).sum()
+
+
+def test_even_background_leaves_clean_and_small_images_alone():
+    from nurbskit.curves.classic import even_background
+
+    clean = _draw([KNOWN * 2], size=(256, 256), width=3.0)
+    assert even_background(clean) is clean
+    small = photograph(_draw([KNOWN / 4], size=(32, 32)), "lamp")  # under 64 px: no lighting model
+    assert even_background(small) is small
+
+
+@pytest.mark.parametrize("light", ["lamp", "vignette", "board"])
+def test_a_photographed_drawing_reads_as_the_clean_one(light):
+    """Uneven light (and noise) defeats one global threshold; with the background evened,
+    the ink is the clean drawing's and the classical path finds its one curve."""
+    from skimage.filters import threshold_otsu
+
+    from nurbskit.curves.classic import even_background
+
+    clean = _draw([KNOWN * 2], size=(256, 256), width=3.0)
+    photo = photograph(clean, light, noise=0.03, seed=5)
+    want, _ = ink_mask(clean)
+    plain = photo <= threshold_otsu(photo)
+    assert _iou(plain if light != "board" else ~plain, want) < 0.5  # Otsu alone fails here
+    got, inverted = ink_mask(even_background(photo))
+    assert inverted == (light == "board")
+    assert _iou(got, want) > 0.8
+    curves = nurbskit.curves_from_image(photo, method="classic")
+    assert len(curves) == 1 and _symmetric(curves, [KNOWN * 2]) < 1.0
+
+
+def test_ink_mask_keeps_clear_of_background_noise():
+    """A short stroke on evenly lit, noisy paper: Otsu alone splits the paper's noise."""
+    from skimage.filters import threshold_otsu
+
+    clean = _draw([np.array([[100.0, 120.0], [120.0, 110.0], [140.0, 125.0], [160.0, 118.0]])], (256, 256), 3.0)
+    photo = np.clip(0.8 * (0.25 + 0.75 * clean) + np.random.default_rng(3).normal(0, 0.04, clean.shape), 0, 1)
+    want, _ = ink_mask(clean)
+    assert (photo <= threshold_otsu(photo)).sum() > 5 * want.sum()
+    got, inverted = ink_mask(photo)
+    assert not inverted and _iou(got, want) > 0.8

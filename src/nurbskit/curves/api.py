@@ -86,7 +86,7 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       count, open and closed strokes), the refined network where strokes cross and the
       skeleton's junction pairing guesses wrong (see ``benchmarks/results/curves_nets.md``).
     """
-    from .classic import Strokes, chamfer_to_ink, fit_image, ink_mask
+    from .classic import Strokes, chamfer_to_ink, even_background, fit_image, ink_mask
     from .classic import refine as refine_curves
 
     if method not in METHODS:
@@ -103,6 +103,7 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         return _hybrid(grey, tolerance, iterations, refine_iterations, source)
     from .nets.predict import network_curves
 
+    grey = even_background(grey)  # as fit_image does for the classical path (a photographed drawing)
     ink, inverted = ink_mask(grey, source)
     if method == "network":
         curves = network_curves(grey, mode, inverted)

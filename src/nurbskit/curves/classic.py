@@ -108,8 +108,80 @@ def to_grey(image, source: str = "image") -> np.ndarray:
     return a
 
 
+# Lighting that varies by more than this (grey levels in [0, 1], across the image) is
+# evened out before thresholding (see even_background).
+_UNEVEN = 0.1
+
+
+def even_background(grey: np.ndarray, n_ctrl: int | None = None) -> np.ndarray:
+    """``grey (H, W)`` in [0, 1] with uneven lighting divided out -> ``(H, W)`` in [0, 1].
+
+    A drawing photographed under a lamp is lighter on one side than the other, and one
+    global threshold (Otsu) then takes a whole side for ink. The paper's (or board's)
+    brightness is fitted as a bicubic B-spline height field of ``n_ctrl x n_ctrl`` control
+    points over the image (``nurbskit.core.basis.basis_matrix``; default one span per 64 px
+    of the shorter side, at most 3 spans: smooth at the scale of a lamp's falloff or a
+    vignette, too stiff to follow a stroke; an image under 64 px across is returned as
+    it is, its lighting not told apart from its strokes), by least squares on
+    the image averaged down to at most 64 px across, four times, each time without the
+    pixels more than 3 robust standard deviations (1.4826 x the median absolute residual)
+    from the last fit, starting from a flat background at the median grey: the strokes,
+    dark or light, are such outliers. Where the background so found varies by at most
+    ``_UNEVEN``, covers less than half the image, or is not one smooth sheet (its pixels
+    spread by over ``_UNEVEN`` about the fit: thick strokes filling a small frame, as
+    a digit), the image is returned unchanged (scans and clean drawings: the same
+    threshold as before). Otherwise light paper is divided by it (light times
+    reflectance: the ink keeps its contrast on both sides) and a dark board has it
+    subtracted, each rescaled to [0, 1].
+    """
+    import torch
+    from skimage.measure import block_reduce
+
+    from ..core.basis import basis_matrix
+    from ..core.knots import clamped_uniform
+
+    h, w = grey.shape
+    if n_ctrl is None:
+        if min(h, w) < 64:
+            return grey
+        n_ctrl = 3 + min(3, min(h, w) // 64)
+    step = max(1, int(np.ceil(max(h, w) / 64)))
+    small = block_reduce(grey, (step, step), np.mean)
+    knots = clamped_uniform(n_ctrl, 3, dtype=torch.float64)
+
+    def basis(centres, extent):  # (N, n_ctrl) at pixel centres of an axis of `extent` px
+        u = torch.as_tensor(np.clip(centres / extent, 0.0, 1.0))
+        return basis_matrix(knots, 3, n_ctrl, u).numpy()
+
+    Br = basis(np.minimum((np.arange(small.shape[0]) + 0.5) * step, h), h)
+    Bc = basis(np.minimum((np.arange(small.shape[1]) + 0.5) * step, w), w)
+    A = np.einsum("ri,cj->rcij", Br, Bc).reshape(-1, n_ctrl * n_ctrl)
+    v = small.reshape(-1)
+    r = v - np.median(v)  # the start: a flat background at the median grey
+    keep = np.abs(r) <= 3 * 1.4826 * np.median(np.abs(r)) + 1e-9
+    sigma = 0.0
+    for _ in range(4):
+        if keep.mean() < 0.5:  # no background covers most of the image
+            return grey
+        Ak = A[keep]  # normal equations (36 x 36): the B-spline basis keeps them well posed
+        coef = np.linalg.solve(Ak.T @ Ak + 1e-9 * np.eye(A.shape[1]), Ak.T @ v[keep])
+        r = v - A @ coef
+        sigma = 1.4826 * np.median(np.abs(r[keep]))
+        keep = np.abs(r) <= 3 * sigma + 1e-9
+    background = basis(np.arange(h) + 0.5, h) @ coef.reshape(n_ctrl, n_ctrl) @ basis(np.arange(w) + 0.5, w).T
+    if keep.mean() < 0.5 or sigma > _UNEVEN or float(background.max() - background.min()) <= _UNEVEN:
+        return grey
+    if float(np.median(background)) >= 0.5:  # light paper: divide by the light
+        out = grey / np.maximum(background, 1e-3)
+    else:  # a dark board: take the glow away
+        out = grey - background
+        out = out - np.percentile(out, 0.1)
+    return np.clip(out / max(float(np.percentile(out, 99.9)), 1e-6), 0.0, 1.0)
+
+
 def ink_mask(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, bool]:
-    """Otsu's threshold; the smaller class is the ink -> ``(mask (H, W) bool, inverted)``.
+    """Otsu's threshold, kept clear of the background's noise; the smaller class is the ink
+    -> ``(mask (H, W) bool, inverted)``.
 
     Raises InputError for a blank image (no contrast: nothing to trace).
     """
@@ -121,7 +193,18 @@ def ink_mask(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, bool]
     t = threshold_otsu(grey)
     dark = grey <= t
     inverted = dark.sum() > dark.size / 2  # most pixels dark: light ink on a dark background
-    mask = ~dark if inverted else dark
+    # On a noisy background with little ink Otsu may split the background's own noise:
+    # the threshold then stays 4 noise standard deviations beyond the median grey (the
+    # background's level). The noise is read from neighbouring pixels' differences
+    # (1.4826 x their median absolute value / sqrt 2), and only where it describes a
+    # background: nine pixels in ten within it of the median. A clean drawing reads no
+    # noise; a small image of thick shaded strokes (a digit) has no such background; both
+    # keep Otsu's threshold.
+    median = float(np.median(grey))
+    spread = 4 * 1.4826 * float(np.median(np.abs(np.diff(grey, axis=1)))) / np.sqrt(2)
+    if np.mean(np.abs(grey - median) <= spread) < 0.9:
+        spread = 0.0
+    mask = grey > max(t, median + spread) if inverted else grey <= min(t, median - spread)
     if not mask.any():
         raise InputError(f"{source}: no ink found after thresholding")
     return mask, bool(inverted)
@@ -1130,7 +1213,7 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
-    grey = to_grey(image, source)
+    grey = even_background(to_grey(image, source))
     ink, inverted = ink_mask(grey, source)
     strokes, width = trace_strokes(ink, tolerance=tolerance, count_prior=count_prior, search_extent=search_extent)
     if min_length is None:

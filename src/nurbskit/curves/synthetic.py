@@ -131,6 +131,36 @@ def render(polylines: list[np.ndarray], size: tuple[int, int], width: float) -> 
     return ink
 
 
+#: How :func:`photograph` lights a drawing.
+LIGHTS = ("lamp", "vignette", "board")
+
+
+def photograph(image: np.ndarray, light: str = "lamp", noise: float = 0.02, seed: int = 0) -> np.ndarray:
+    """A drawing ``(H, W)`` (dark strokes on 1) as a phone photographs it -> ``(H, W)`` in [0, 1].
+
+    ``light``: ``"lamp"`` (paper lit from one corner: its brightness falls linearly from
+    0.95 to 0.4 across the page; the ink reflects a quarter of the paper's light),
+    ``"vignette"`` (the lens darkens the corners to 0.4 of the centre; ink a fifth),
+    ``"board"`` (light strokes, 0.55 above a dark board, and a lamp's round glow of 0.35
+    on the board off-centre). ``noise``: the standard deviation of Gaussian sensor noise
+    added to every pixel (deterministic by ``seed``). For the tests and benchmarks of
+    thresholding under uneven lighting (:func:`nurbskit.curves.classic.even_background`).
+    """
+    if light not in LIGHTS:
+        raise OptionError(f"light: expected one of {', '.join(LIGHTS)}, got {light!r}")
+    h, w = image.shape
+    y, x = np.mgrid[0:h, 0:w]
+    x, y = (x + 0.5) / w, (y + 0.5) / h
+    if light == "lamp":
+        out = (0.4 + 0.55 * (0.6 * x + 0.4 * y)) * (0.25 + 0.75 * image)
+    elif light == "vignette":
+        out = (1.0 - 1.2 * ((x - 0.5) ** 2 + (y - 0.5) ** 2)) * (0.2 + 0.8 * image)
+    else:
+        out = 0.05 + 0.35 * np.exp(-((x - 0.2) ** 2 + (y - 0.3) ** 2) / 0.1) + 0.55 * (1.0 - image)
+    out = out + np.random.default_rng(seed).normal(0.0, noise, image.shape)
+    return np.clip(out, 0.0, 1.0)
+
+
 def make_sample(seed: int, config: SyntheticConfig = SyntheticConfig()) -> Sample:
     """The drawing number ``seed``: the same seed gives the same drawing on every machine.
 

@@ -700,7 +700,7 @@ class CurvesTab(TabBase):
         import time
 
         import nurbskit
-        from ..curves.classic import chamfer_to_ink, ink_mask
+        from ..curves.classic import chamfer_to_ink, even_background, ink_mask
 
         if self.grey is None:
             raise OptionError("load an image first")
@@ -710,7 +710,7 @@ class CurvesTab(TabBase):
         curves = nurbskit.curves_from_image(self.grey, **kwargs)
         seconds = time.perf_counter() - t0
         progress(0.9)  # raises Stopped when Stop was pressed meanwhile (the call itself has no callback)
-        ink, inverted = ink_mask(self.grey, self.name)
+        ink, inverted = ink_mask(even_background(self.grey), self.name)  # the ink the curves were read from
         h, w = self.grey.shape
         return curves, {
             "size": (w, h), "method": kwargs["method"], "curves": len(curves),
