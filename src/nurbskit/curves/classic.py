@@ -150,12 +150,13 @@ def even_background(grey: np.ndarray, n_ctrl: int | None = None) -> np.ndarray:
     knots = clamped_uniform(n_ctrl, 3, dtype=torch.float64)
 
     def basis(centres, extent):  # (N, n_ctrl) at pixel centres of an axis of `extent` px
-        u = torch.as_tensor(np.clip(centres / extent, 0.0, 1.0))
-        return basis_matrix(knots, 3, n_ctrl, u).numpy()
+        return basis_matrix(knots, 3, n_ctrl, torch.as_tensor(np.clip(centres / extent, 0.0, 1.0)))
 
+    # The products run in torch, on its threads: numpy's BLAS would start threads of its own
+    # (which spin on a second core after each call).
     Br = basis(np.minimum((np.arange(small.shape[0]) + 0.5) * step, h), h)
     Bc = basis(np.minimum((np.arange(small.shape[1]) + 0.5) * step, w), w)
-    A = np.einsum("ri,cj->rcij", Br, Bc).reshape(-1, n_ctrl * n_ctrl)
+    A = torch.einsum("ri,cj->rcij", Br, Bc).reshape(-1, n_ctrl * n_ctrl)
     v = small.reshape(-1)
     r = v - np.median(v)  # the start: a flat background at the median grey
     keep = np.abs(r) <= 3 * 1.4826 * np.median(np.abs(r)) + 1e-9
@@ -163,12 +164,14 @@ def even_background(grey: np.ndarray, n_ctrl: int | None = None) -> np.ndarray:
     for _ in range(4):
         if keep.mean() < 0.5:  # no background covers most of the image
             return grey
-        Ak = A[keep]  # normal equations (36 x 36): the B-spline basis keeps them well posed
-        coef = np.linalg.solve(Ak.T @ Ak + 1e-9 * np.eye(A.shape[1]), Ak.T @ v[keep])
-        r = v - A @ coef
+        Ak = A[torch.as_tensor(keep)]  # normal equations (36 x 36): the B-spline basis keeps them well posed
+        rhs = Ak.T @ torch.as_tensor(v[keep])
+        coef = torch.linalg.solve(Ak.T @ Ak + 1e-9 * torch.eye(A.shape[1], dtype=A.dtype), rhs)
+        r = v - (A @ coef).numpy()
         sigma = 1.4826 * np.median(np.abs(r[keep]))
         keep = np.abs(r) <= 3 * sigma + 1e-9
-    background = basis(np.arange(h) + 0.5, h) @ coef.reshape(n_ctrl, n_ctrl) @ basis(np.arange(w) + 0.5, w).T
+    background = (basis(np.arange(h) + 0.5, h) @ coef.reshape(n_ctrl, n_ctrl)
+                  @ basis(np.arange(w) + 0.5, w).T).numpy()
     if keep.mean() < 0.5 or sigma > _UNEVEN or float(background.max() - background.min()) <= _UNEVEN:
         return grey
     if float(np.median(background)) >= 0.5:  # light paper: divide by the light
