@@ -16,6 +16,7 @@ Examples::
 
     nurbskit curves digit.png --out out/digit
     nurbskit curves sketch.jpg --out out/sketch --tolerance 2 --refine
+    nurbskit curves phone_photo.jpg --out out/photo
     nurbskit curves splines.png --out out/net --method network --mode MV --refine
 """
 
@@ -35,9 +36,10 @@ from ._options import int_in, number_in
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "curves", help="B-spline curves from a drawing (handwriting, sketches, line art)",
-        description="Trace the strokes of IMAGE (dark on light or light on dark, detected) and fit a cubic "
-                    "B-spline to each; write curves.json, curves.svg, overlay.png and report.json to --out.",
+        "curves", help="B-spline curves from a drawing (handwriting, sketches, line art, photographs of them)",
+        description="Trace the strokes of IMAGE (dark on light or light on dark, detected; a photograph's uneven "
+                    "lighting is evened first) and fit a cubic B-spline to each; write curves.json, curves.svg, "
+                    "overlay.png and report.json to --out.",
     )
     p.add_argument("image", metavar="IMAGE", help="image file (PNG, JPEG, BMP, TIFF, ...)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
