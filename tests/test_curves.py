@@ -171,6 +171,8 @@ def test_even_background_leaves_clean_and_small_images_alone():
     assert even_background(clean) is clean
     small = photograph(_draw([KNOWN / 4], size=(32, 32)), "lamp")  # under 64 px: no lighting model
     assert even_background(small) is small
+    with pytest.raises(OptionError, match="light"):
+        photograph(clean, "sun")
 
 
 @pytest.mark.parametrize("light", ["lamp", "vignette", "board"])
