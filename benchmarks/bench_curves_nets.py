@@ -96,10 +96,11 @@ def table2(mode: str, count: int, chunk: int = 100, views: int = 1):
         else:  # V read in several views: MSE decoded for the true counts, the counts as read
             steps = int(batch.counts.max())
             true = batch.counts[:, :1]
-            points = read_views(model, ink, views, counts=true)[0][:, 0, :steps]
+            points, _, read = read_views(model, ink, views, counts=true)
+            points = points[:, 0, :steps]
             valid = (torch.arange(steps) < true).float()
             parts = {"mse": _mse(points, unit[:, 0, :steps].to(points.dtype), valid),
-                     "point_acc": (read_views(model, ink, views)[2] == true).float().mean()}
+                     "point_acc": (read == true).float().mean()}
         for k, v in parts.items():
             sums[k] = sums.get(k, 0.0) + float(v) * n
         predicted = predict_unit(model, ink, views)

@@ -137,8 +137,9 @@ def read_views(model, ink: torch.Tensor, views: int = 1, counts: torch.Tensor | 
     (each curve's count), and their control points mapped back for that count. A
     recurrent decoder's error grows along the sequence it emits; a view flipped in x emits
     it backwards, so the average gains most at the ends. ``counts (B, K)``, when given,
-    replaces the point counts read (the benchmark's "decoded for the true number of
-    points").
+    decides how the sequences are reversed and read in place of the counts read (the
+    benchmark's "decoded for the true number of points"); the counts returned are always
+    the ones read.
     """
     from .train import hungarian
 
@@ -161,9 +162,8 @@ def read_views(model, ink: torch.Tensor, views: int = 1, counts: torch.Tensor | 
         if point_logp is not None:
             matched_logp.append(point_logp[j].gather(1, perm[..., None, None].expand(point_logp[j].shape)))
     n = _point_counts(None if point_logp is None else torch.stack(matched_logp).mean(0), pts[0].shape)
-    if counts is not None:
-        n = counts
-    mean = torch.stack([_unview(p, n, *f) for p, f in zip(matched_pts, flips)]).mean(0)
+    decode = n if counts is None else counts
+    mean = torch.stack([_unview(p, decode, *f) for p, f in zip(matched_pts, flips)]).mean(0)
     return mean, k, n
 
 
