@@ -446,8 +446,24 @@ def test_warm_start_and_restart():
 
 
 def _batched(spline, cps, ws, kvs=None):
-    """A batched spline object (the loop at project_points' boundary takes it apart)."""
+    """A batched spline object: control points ``(*B, ...)``, knots shared or per element."""
     return spline._replace(control_points=cps, weights=ws, knot_vectors=kvs or list(spline.knot_vectors))
+
+
+def _each_alone(batch, points, params=None, **options):
+    """The oracle of a batch: ``project_points`` on every element alone, stacked."""
+    out = []
+    for index in np.ndindex(batch.batch_shape):
+        warm = None if params is None else params[index]
+        out.append(project_points(batch[index], points[index], params=warm, **options))
+    return [torch.stack([o[j] for o in out]).reshape(batch.batch_shape + out[0][j].shape) for j in range(3)]
+
+
+def _assert_like_each_alone(res, alone):
+    # the same iterates point by point: equal, up to the rounding of a batched final evaluation
+    assert torch.equal(res.params, alone[0])
+    assert_close(res.closest, alone[1], atol=1e-14)
+    assert_close(res.distance, alone[2], atol=1e-14)
 
 
 def test_batched_surfaces_project_like_a_loop():
@@ -455,17 +471,94 @@ def test_batched_surfaces_project_like_a_loop():
     g = torch.Generator().manual_seed(51)
     cps = torch.stack([base.control_points * (1 + 0.1 * i) for i in range(3)])  # (3, 3, 2, 3)
     ws = base.weights.expand(3, 3, 2).clone()
-    kvs = [torch.stack([base.knot_vectors[0]] * 3), base.knot_vectors[1]]  # per element and shared
-    batch = _batched(base, cps, ws, kvs)
+    kvs = [torch.stack([base.knot_vectors[0] * (1 + 0.5 * i) for i in range(3)]), base.knot_vectors[1]]
+    batch = _batched(base, cps, ws, kvs)  # u knots per element (three domains), v shared
     p = torch.rand(3, 40, 3, dtype=F64, generator=g) * 3
     res = project_points(batch, p)
     assert res.params.shape == (3, 40, 2) and res.distance.shape == (3, 40)
+    _assert_like_each_alone(res, _each_alone(batch, p))
+    # each element in its own domain, and at the closed-form distance of its scaled cylinder
     for i in range(3):
-        one = project_points(base._replace(control_points=cps[i]), p[i])
-        assert torch.equal(res.params[i], one.params)
-        assert torch.equal(res.distance[i], one.distance)
+        assert bool((res.params[i, :, 0] >= -1 - 0.5 * i).all() and (res.params[i, :, 0] <= 2 + i).all())
+        truth = cylinder_closest(p[i] / (1 + 0.1 * i)) * (1 + 0.1 * i)
+        assert_close(res.closest[i], truth, atol=1e-12)
+    # several starts, warm starts and restarts take the same path
+    _assert_like_each_alone(project_points(batch, p, starts=3), _each_alone(batch, p, starts=3))
+    bad = torch.zeros(3, 40, 2, dtype=F64)
+    _assert_like_each_alone(project_points(batch, p, params=bad, restart=True),
+                            _each_alone(batch, p, params=bad, restart=True))
+    _assert_like_each_alone(project_points(batch, p, params=res.params, iterations=2, check_every=0),
+                            _each_alone(batch, p, params=res.params, iterations=2, check_every=0))
     with pytest.raises(NurbskitError, match="spline batch"):
         project_points(batch, p[:2])
+
+
+def test_a_batch_keeps_each_elements_periodic_directions():
+    # a closed cylinder beside one whose seam is open (its last control column moved): the
+    # first wraps across the seam, the second stops at its domain edge, each as when alone
+    s = closed_cylinder()
+    opened = s.control_points.clone()
+    opened[:, -2:, 2] += 0.25
+    batch = _batched(s, torch.stack([s.control_points, opened]), s.weights.expand(2, 2, 10).clone())
+    from nurbskit.core.project import periodic_directions
+
+    assert [periodic_directions(batch[i]) for i in range(2)] == [(False, True), (False, False)]
+    assert periodic_directions(batch) == ((False, True), (False, False))
+    p, truth = _seam_points()
+    p = torch.stack([p, p])
+    res = project_points(batch, p)
+    _assert_like_each_alone(res, _each_alone(batch, p))
+    assert_close(res.distance[0], truth, atol=1e-12)
+    # said explicitly for the whole batch, the open seam wraps too: the caller's choice
+    said = project_points(batch, p, periodic=(False, True))
+    assert torch.equal(said.params[0], res.params[0])
+
+
+def test_batched_curves_any_batch_shape_and_no_points():
+    rng = np.random.default_rng(52)
+    cps = torch.tensor(rng.normal(size=(2, 3, 6, 2)), dtype=F64)
+    ws = torch.tensor(rng.uniform(0.5, 2.0, size=(2, 3, 6)), dtype=F64)
+    batch = NURBSCurve(cps, degree=3, weights=ws)
+    p = torch.tensor(rng.normal(size=(2, 3, 25, 2)), dtype=F64)
+    res = project_points_curve(batch, p)
+    assert res.params.shape == (2, 3, 25) and res.closest.shape == (2, 3, 25, 2)
+    _assert_like_each_alone(res, _each_alone(batch, p))
+    empty = project_points(batch, p[:, :, :0])
+    assert empty.params.shape == (2, 3, 0) and empty.distance.shape == (2, 3, 0)
+
+
+def test_batched_projection_is_one_pass_with_per_element_gradients():
+    from nurbskit._opcount import OperationCounter
+
+    base = smooth_height_field(53)
+    g = torch.Generator().manual_seed(53)
+
+    def batch_of(count):
+        cps = base.control_points + 0.05 * torch.randn((count,) + base.control_points.shape, dtype=F64, generator=g)
+        return _batched(base, cps.requires_grad_(True), base.weights.expand((count,) + base.weights.shape).clone())
+
+    def points(batch):
+        uv = torch.rand(batch.control_points.shape[0], 50, 2, dtype=F64, generator=g) * 2 - torch.tensor([0.0, 1.0])
+        return (batch.detach().evaluate(uv) + 0.05 * torch.randn(uv.shape[:-1] + (3,), dtype=F64, generator=g))
+
+    counts = []
+    for count in (2, 16):
+        b = batch_of(count)
+        x = points(b)
+        first = project_points(b, x)
+        with OperationCounter() as ops:  # a fit's warm refresh: nothing read back, no loop over elements
+            project_points(b, x, params=first.params, iterations=2, check_every=0, validate=False,
+                           periodic=(False, False), second_order=False)
+        assert ops.host_reads == 0, ops.host_read_names()
+        counts.append(ops.operations)
+    assert counts[0] == counts[1]
+    # gradients reach each element's control points from its own points only
+    first.distance.sum().backward()
+    grad = b.control_points.grad
+    for i in (0, 7, 15):
+        cp = b.control_points.detach()[i].clone().requires_grad_(True)
+        project_points(base._replace(control_points=cp), x[i]).distance.sum().backward()
+        assert_close(grad[i], cp.grad, atol=1e-13)
 
 
 def test_coarse_to_fine_grid_search_finds_the_nearest_sample(monkeypatch):

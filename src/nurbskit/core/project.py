@@ -73,17 +73,18 @@ _J_ROWS = {2: torch.tensor([3, 1]), 1: torch.tensor([2, 1])}  # S_u, S_v in the 
 _H_ROWS = torch.tensor([6, 4, 4, 2])  # S_uu, S_uv; S_uv, S_vv in the 3 x 3 table
 
 
-def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor, second_order: bool = True):
+def _local_model(spline, Pw: Tensor, t: Tensor, x: Tensor, second_order: bool = True, element: Tensor | None = None):
     """Point, squared distance, gradient and Hessian of ``|C(t) - x|^2 / 2``.
 
     Shapes: ``t (M, k)``, ``x (M, dim)`` -> ``C (M, dim)``, ``f (M,)`` (the squared
     distance), ``g (M, k)``, ``H (M, k, k)``, ``J (M, k, dim)``. Derivatives come from
     homogeneous points ``Pw`` formed once per projection rather than once per iteration.
     With ``second_order=False`` the Hessian is the Gauss-Newton ``J J^T`` (first
-    derivatives only: about a third of the work; exact at zero residual).
+    derivatives only: about a third of the work; exact at zero residual). For a batch,
+    ``Pw (Bt, n_u, n_v, D)`` and point ``i`` lies on element ``element[i]``.
     """
     order = 2 if second_order else 1
-    D = _tp.derivatives_from_homogeneous(Pw, spline.knot_vectors, spline.degrees, t, order)
+    D = _tp.derivatives_from_homogeneous(Pw, spline.knot_vectors, spline.degrees, t, order, element)
     m, dim = D.shape[0], D.shape[-1]
     if spline.para_dim == 1:  # (M, o + 1, dim)
         C = D[:, 0]
@@ -170,27 +171,38 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
 
 
 class _Domain(NamedTuple):
-    """The parameter box as tensors (no host read): ``lo``, ``hi`` ``(k,)``; a periodic
-    direction has ``lo = -inf``, ``hi = inf`` for the clamp and wraps into
-    ``[start, start + period)`` instead."""
+    """The parameter box as tensors (no host read): ``lo``, ``hi`` ``(k,)``, or ``(Bt, k)``
+    per element of a batch and ``(M, k)`` per point once :meth:`take` has picked each
+    point's row; a periodic direction has ``lo = -inf``, ``hi = inf`` for the clamp and
+    wraps into ``[start, start + period)`` instead."""
 
     lo: Tensor
     hi: Tensor
     start: Tensor
     period: Tensor
-    periodic: Tensor  # (k,) bool
+    periodic: Tensor  # (k,) or (rows, k) bool
 
     def fold(self, t: Tensor) -> Tensor:
         t = torch.maximum(torch.minimum(t, self.hi), self.lo)
         wrapped = self.start + torch.remainder(t - self.start, self.period)
         return torch.where(self.periodic, wrapped, t)
 
+    def take(self, index: Tensor) -> "_Domain":
+        """Rows ``index`` of a per-row domain; a shared ``(k,)`` domain is returned as it is."""
+        if self.lo.ndim < 2:
+            return self
+        return _Domain(*(z.index_select(0, index) for z in self))
 
-def _domain(spline, periodic: Sequence[bool]) -> _Domain:
+
+def _domain(spline, periodic) -> _Domain:
+    """The domain of ``spline``: ``(k,)`` fields, or ``(Bt, k)`` where knots (``(Bt, m)``) or
+    ``periodic`` (a ``(Bt, k)`` bool tensor) differ per element of a flat batch."""
     kvs = [kv.detach() for kv in spline.knot_vectors]
-    a = torch.stack([kv[p] for kv, p in zip(kvs, spline.degrees)])
-    b = torch.stack([kv[n] for kv, n in zip(kvs, spline.sizes)])
-    per = torch.tensor(list(periodic), dtype=torch.bool, device=a.device)
+    a = torch.stack(torch.broadcast_tensors(*[kv[..., p] for kv, p in zip(kvs, spline.degrees)]), -1)
+    b = torch.stack(torch.broadcast_tensors(*[kv[..., n] for kv, n in zip(kvs, spline.sizes)]), -1)
+    per = torch.as_tensor(periodic if isinstance(periodic, Tensor) else list(periodic), dtype=torch.bool,
+                          device=a.device)
+    a, b, per = torch.broadcast_tensors(a, b, per)
     inf = torch.full_like(a, float("inf"))
     return _Domain(torch.where(per, -inf, a), torch.where(per, inf, b), a, b - a, per)
 
@@ -198,13 +210,16 @@ def _domain(spline, periodic: Sequence[bool]) -> _Domain:
 @torch.no_grad()
 def _newton(
     spline, Pw: Tensor, t: Tensor, x: Tensor, dom: _Domain, iterations: int, tol_move: Tensor, noise: Tensor,
-    check_every: int, second_order: bool = True,
+    check_every: int, second_order: bool = True, element: Tensor | None = None,
 ) -> Tensor:
     """Refine start parameters ``t (M, k)`` for points ``x (M, dim)`` -> ``(M, k)``.
 
     ``noise`` is the rounding error of a computed point (``eps`` times the size of the
     control net): a step is accepted unless it raises ``f = |r|^2`` by more than the
-    rounding of ``f``, about ``4 noise (|r| + noise)``.
+    rounding of ``f``, about ``4 noise (|r| + noise)``. For a batch (``Pw (Bt, ...)``),
+    ``element (M,)`` names each point's element, and ``dom`` (``(M, k)`` fields),
+    ``tol_move`` and ``noise`` (``(M,)``) may be per point; each point's iterates are
+    those it would take on its element alone.
 
     Masked iterations: every point takes part in every iteration, and a point that has
     converged is frozen by ``torch.where``, so an iteration reads nothing back to the
@@ -214,7 +229,7 @@ def _newton(
     """
     t = dom.fold(t)
     out = t.clone()
-    _, f, g, H, J = _local_model(spline, Pw, t, x, second_order)
+    _, f, g, H, J = _local_model(spline, Pw, t, x, second_order, element)
     scale = torch.ones_like(f)
     done = torch.zeros_like(f, dtype=torch.bool)
     index = None  # rows of `out` still in the state (None: all, in order)
@@ -223,7 +238,7 @@ def _newton(
     for it in range(iterations):
         d = _step(g, H, J, t, dom.lo, dom.hi) * scale[:, None]
         cand = dom.fold(t + d)
-        _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x, second_order)
+        _, fc, gc, Hc, Jc = _local_model(spline, Pw, cand, x, second_order, element)
         accept = (fc <= f + 4 * noise * (f.sqrt() + noise)) & ~done
         # the step actually taken (a periodic wrap does not count as movement)
         delta = torch.where(dom.periodic, torch.maximum(torch.minimum(d, dom.hi), dom.lo), cand - t)
@@ -247,6 +262,10 @@ def _newton(
                 keep = torch.nonzero(~done).reshape(-1)
                 index = rows.index_select(0, keep)
                 t, f, g, H, J, scale, x, done = (z.index_select(0, keep) for z in (t, f, g, H, J, scale, x, done))
+                # what a batch holds per point (shared values pass through)
+                dom = dom.take(keep)
+                tol_move, noise = (z.index_select(0, keep) if z.ndim else z for z in (tol_move, noise))
+                element = None if element is None else element.index_select(0, keep)
     if index is None:
         return t
     out.index_copy_(0, index, t)
@@ -257,8 +276,8 @@ def _newton(
 # start points
 # ----------------------------------------------------------------------------------------
 def _as_eval(t: Tensor, k: int) -> Tensor:
-    """``(M, k)`` -> what ``evaluate`` takes: ``(M,)`` for curves, ``(M, 2)`` for surfaces."""
-    return t[:, 0] if k == 1 else t
+    """``(..., M, k)`` -> what ``evaluate`` takes: ``(..., M)`` for curves, ``(..., M, 2)`` for surfaces."""
+    return t[..., 0] if k == 1 else t
 
 
 def _resolution(spline, grid) -> tuple[int, ...]:
@@ -271,44 +290,60 @@ def _resolution(spline, grid) -> tuple[int, ...]:
     return res
 
 
-def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1) -> tuple[Tensor, Tensor]:
+def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1,
+                 elements: int | None = None) -> tuple[Tensor, Tensor]:
     """Start parameters for Newton: ``rows (E,)`` (indices into the points) and ``t0 (E, k)``.
 
-    Each point starts from its ``starts`` nearest grid samples (the first ``N`` entries are
-    each point's nearest one, in order), found by :mod:`nurbskit.core.neighbors`. Samples
+    Each point starts from its ``starts`` nearest grid samples (for one spline the first
+    ``N`` entries are each point's nearest one, in order), found by
+    :mod:`nurbskit.core.neighbors`. Samples
     where the map degenerates (the pole of a sphere patch, ``C_u = 0``) are saddles for
     Newton: the gradient along the collapsed direction vanishes there, so Newton cannot
     leave them towards a boundary minimum nearby. When the grid has such samples, every
     point therefore also starts from its nearest regular sample (the degenerate point
     itself may be the true foot point); deciding this per grid, not per point, keeps the
     number of starts independent of the data (no host read per point).
+
+    A flat batch of ``elements`` splines takes ``points (Bt * N, dim)``, element by
+    element: the grids of all elements are evaluated in one call and their degenerate
+    samples found together (one host read); the nearest-sample search then runs per
+    element, on that element's grid, and ``rows`` index the flat points.
     """
-    axes = spline.grid_axes(_resolution(spline, grid))
-    k = spline.para_dim
-    D = spline.evaluate_grid(*axes, order=1).reshape(-1, *(2,) * k, spline.dim)
+    res = _resolution(spline, grid)
+    axes = spline.grid_axes(res)  # (R_a,), or (Bt, R_a) for per-element knots
+    k, dim = spline.para_dim, spline.dim
+    lead = () if elements is None else (elements,)
+    D = spline.evaluate_grid(*axes, order=1).reshape(lead + (-1,) + (2,) * k + (dim,))
     if k == 1:
-        samples, J = D[:, 0], D[:, 1:2]
+        samples, J = D[..., 0, :], D[..., 1:2, :]
     else:
-        samples, J = D[:, 0, 0], torch.stack([D[:, 1, 0], D[:, 0, 1]], dim=1)
-    mesh = torch.meshgrid(*axes, indexing="ij")
-    table = torch.stack([m.reshape(-1) for m in mesh], dim=-1)  # (G, k), same order as samples
-    JJ = J @ J.transpose(1, 2)
-    gram = JJ[:, 0, 0] if k == 1 else JJ[:, 0, 0] * JJ[:, 1, 1] - JJ[:, 0, 1] * JJ[:, 1, 0]
-    regular = gram > 1e-12 * gram.max()
+        samples, J = D[..., 0, 0, :], torch.stack([D[..., 1, 0, :], D[..., 0, 1, :]], dim=-2)
+    # the parameters of the samples, in their order (u slowest): (*lead, G, k)
+    mesh = [a.reshape(a.shape[:-1] + (1,) * i + (res[i],) + (1,) * (k - 1 - i)).expand(lead + tuple(res))
+            for i, a in enumerate(axes)]
+    table = torch.stack([m.reshape(lead + (-1,)) for m in mesh], dim=-1)
+    JJ = J @ J.transpose(-1, -2)
+    gram = JJ[..., 0, 0] if k == 1 else JJ[..., 0, 0] * JJ[..., 1, 1] - JJ[..., 0, 1] * JJ[..., 1, 0]
+    regular = gram > 1e-12 * gram.amax(-1, keepdim=True)
+    degenerate = (~regular.all(-1) & regular.any(-1)).reshape(-1).tolist()  # per grid: the one host read
     x = points.detach().to(samples.dtype)
-    n = x.shape[0]
-    if starts == 1 and _use_coarse(samples.device, n * samples.shape[0]):
-        idx = _coarse_to_fine(samples, [a.numel() for a in axes], x)[:, None]
-    else:
-        idx = k_nearest(x, samples, starts).to(table.device)  # (N, count)
-    own = torch.arange(n, device=table.device)
-    rows = [own] * idx.shape[1]
-    t0 = [table.index_select(0, idx[:, j]) for j in range(idx.shape[1])]
-    if not bool(regular.all()) and bool(regular.any()):
-        keep = torch.nonzero(regular).reshape(-1)
-        sub = k_nearest(x, samples.index_select(0, keep), 1)[:, 0]
-        rows.append(own)
-        t0.append(table.index_select(0, keep.index_select(0, sub)))
+    n = x.shape[0] // (elements or 1)
+    rows, t0 = [], []
+    for e in range(elements or 1):
+        S, T, xe = (samples, table, x) if elements is None else (samples[e], table[e], x[e * n : (e + 1) * n])
+        if starts == 1 and _use_coarse(S.device, n * S.shape[0]):
+            idx = _coarse_to_fine(S, res, xe)[:, None]
+        else:
+            idx = k_nearest(xe, S, starts).to(T.device)  # (N, count)
+        own = torch.arange(e * n, (e + 1) * n, device=T.device)
+        rows += [own] * idx.shape[1]
+        t0 += [T.index_select(0, idx[:, j]) for j in range(idx.shape[1])]
+        if degenerate[e]:
+            keep = torch.nonzero(regular if elements is None else regular[e]).reshape(-1)
+            sub = k_nearest(xe, S.index_select(0, keep), 1)[:, 0]
+            rows.append(own)
+            t0.append(T.index_select(0, keep.index_select(0, sub)))
+    # element-major; each element's starts in the order a single spline gives them
     return torch.cat(rows), torch.cat(t0)
 
 
@@ -398,8 +433,10 @@ def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
     first, as a full revolution's nine-point circle: the seam is only ``C^0`` in the
     parameter, but the point at the domain's end is the point at its start, so a Newton
     step may leave at one end and come back in at the other). Equality is up to ``tol`` relative to the size of the
-    control net (default ``64 eps``). Reads a few values back to the host: pass
-    ``periodic=`` to :func:`project_points` inside loops.
+    control net (default ``64 eps``). Reads one value back to the host: pass
+    ``periodic=`` to :func:`project_points` inside loops. A batch of splines gets one
+    tuple per element (flattened batch order); :func:`project_points` judges each
+    element on its own.
 
     Example:
         >>> import torch
@@ -409,28 +446,48 @@ def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
         >>> periodic_directions(NURBSCurve(P, degree=2, knot_vector=knots))
         (True,)
     """
+    mask = _periodic_mask(spline, tol)
+    if mask.ndim > 1:
+        return tuple(tuple(bool(v) for v in row) for row in mask.reshape(-1, mask.shape[-1]).tolist())
+    return tuple(bool(v) for v in mask.tolist())  # the one host read
+
+
+def _periodic_mask(spline, tol: float | None = None) -> Tensor:
+    """:func:`periodic_directions` as a bool tensor ``(k,)``, or ``(Bt, k)`` for a flat batch
+    (control points ``(Bt, n_1, ..., dim)``, knots ``(m,)`` or ``(Bt, m)``), each element
+    judged on its own; reads nothing back to the host."""
     with torch.no_grad():
         cp, w = spline.control_points.detach(), spline.weights.detach()
+        k = spline.para_dim
+        lead = tuple(cp.shape[: cp.ndim - k - 1])
         eps = torch.finfo(cp.dtype).eps
-        flat = cp.reshape(-1, cp.shape[-1])
-        size = float((flat.amax(0) - flat.amin(0)).norm()) or 1.0
+        flat = cp.reshape(lead + (-1, cp.shape[-1]))
+        size = (flat.amax(-2) - flat.amin(-2)).norm(dim=-1, keepdim=True)  # (*lead, 1)
+        size = torch.where(size > 0, size, torch.ones_like(size))
+        w_max = w.abs().reshape(lead + (-1,)).amax(-1, keepdim=True)
         rel = (64 * eps) if tol is None else float(tol)
+
+        def within(a, b, scale):  # every entry of a - b (leading batch axes kept) within rel * scale
+            return ((a - b).abs().reshape(lead + (-1,)) <= rel * scale).all(-1)
+
         out = []
         for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
             kv = kv.detach()
             if p < 1 or n <= p:
-                out.append(False)
+                out.append(torch.zeros(lead, dtype=torch.bool, device=cp.device))
                 continue
-            gaps = kv[1:] - kv[:-1]  # n + p gaps; period n - p
-            span = float(kv[n] - kv[p]) or 1.0
-            same_gaps = bool(((gaps[: 2 * p] - gaps[n - p : n + p]).abs() <= rel * span).all())
-            same_cp = bool(((cp.narrow(a, 0, p) - cp.narrow(a, n - p, p)).abs() <= rel * size).all())
-            same_w = bool(((w.narrow(a, 0, p) - w.narrow(a, n - p, p)).abs() <= rel * w.abs().amax()).all())
-            clamped = bool((gaps[:p].abs() <= rel * span).all() and (gaps[n:].abs() <= rel * span).all())
-            closed_cp = bool(((cp.narrow(a, 0, 1) - cp.narrow(a, n - 1, 1)).abs() <= rel * size).all())
-            closed_w = bool(((w.narrow(a, 0, 1) - w.narrow(a, n - 1, 1)).abs() <= rel * w.abs().amax()).all())
-            out.append((same_gaps and same_cp and same_w) or (clamped and closed_cp and closed_w))
-        return tuple(out)
+            ax = len(lead) + a
+            gaps = kv[..., 1:] - kv[..., :-1]  # n + p gaps; period n - p
+            span = (kv[..., n] - kv[..., p]).unsqueeze(-1)
+            span = torch.where(span != 0, span, torch.ones_like(span))
+            same_gaps = ((gaps[..., : 2 * p] - gaps[..., n - p : n + p]).abs() <= rel * span).all(-1)
+            clamped = (gaps[..., :p].abs() <= rel * span).all(-1) & (gaps[..., n:].abs() <= rel * span).all(-1)
+            periodic = (same_gaps & within(cp.narrow(ax, 0, p), cp.narrow(ax, n - p, p), size)
+                        & within(w.narrow(ax, 0, p), w.narrow(ax, n - p, p), w_max))
+            closed = (clamped & within(cp.narrow(ax, 0, 1), cp.narrow(ax, n - 1, 1), size)
+                      & within(w.narrow(ax, 0, 1), w.narrow(ax, n - 1, 1), w_max))
+            out.append(periodic | closed)
+        return torch.stack(torch.broadcast_tensors(*out), -1)
 
 
 # ----------------------------------------------------------------------------------------
@@ -439,14 +496,6 @@ def periodic_directions(spline, tol: float | None = None) -> tuple[bool, ...]:
 def _batch_shape(spline) -> tuple[int, ...]:
     """Leading batch dimensions of a spline's control points ``(*B, n_1..n_k, dim)``."""
     return tuple(spline.control_points.shape[: spline.control_points.ndim - spline.para_dim - 1])
-
-
-def _element(spline, i: int, batch: tuple[int, ...]):
-    """Element ``i`` (flat index) of a batched spline: knots shared ``(m,)`` or per element ``(*B, m)``."""
-    cp = spline.control_points.reshape(-1, *spline.control_points.shape[len(batch):])[i]
-    w = spline.weights.reshape(-1, *spline.weights.shape[len(batch):])[i]
-    kvs = [kv if kv.ndim == 1 else kv.reshape(-1, kv.shape[-1])[i] for kv in spline.knot_vectors]
-    return spline._replace(control_points=cp, weights=w, knot_vectors=kvs)
 
 
 def project_points(
@@ -510,9 +559,12 @@ def project_points(
 
     Convention: a batched spline (control points ``(*B, n_u, n_v, dim)``, knots shared
     ``(m,)`` or per element ``(*B, m)``) takes points ``(*B, N, dim)`` and projects each
-    batch element onto its own surface. The elements are projected one after another
-    (a loop at this boundary, until the core's kernels take a batch); the results are
-    those of projecting each element alone.
+    batch element onto its own surface, in one pass: one grid evaluation for all
+    elements, the nearest-sample search per element, then Newton on every element's
+    points together (each point evaluates its own element; periodic directions,
+    domains and tolerances are each element's). The results are those of projecting
+    each element alone (the same iterates point by point), and a warm call's operations
+    do not grow with the batch (``benchmarks/bench_projection_batch.py``).
 
     Example:
         >>> import torch
@@ -555,85 +607,114 @@ def project_points(
                    check_every=check_every, validate=validate, second_order=second_order)
 
     batch_shape = _batch_shape(spline)
-    if batch_shape:
-        # Batched spline: one element after another (marked: a loop at the API boundary).
-        if tuple(x.shape[: len(batch_shape)]) != batch_shape or x.ndim != len(batch_shape) + 2:
-            raise NurbskitError(
-                f"project_points: a spline batch {batch_shape} takes points {batch_shape + ('N', spline.dim)}, "
-                f"got {tuple(x.shape)}"
-            )
-        count = math.prod(batch_shape)
-        xs = x.reshape(count, *x.shape[len(batch_shape):])
-        ps = None if params is None else params.reshape(count, *params.shape[len(batch_shape):])
-        parts = [
-            _project_one(_element(spline, i, batch_shape), xs[i], periodic, None if ps is None else ps[i], **options)
-            for i in range(count)
-        ]
-        return Projection(*(torch.stack(z).reshape(batch_shape + z[0].shape) for z in zip(*parts)))
-    return _project_one(spline, x, periodic, params, **options)
+    if not batch_shape:
+        return _project(spline, x, periodic, params, None, **options)
+    if tuple(x.shape[: len(batch_shape)]) != batch_shape or x.ndim != len(batch_shape) + 2:
+        raise NurbskitError(
+            f"project_points: a spline batch {batch_shape} takes points {batch_shape + ('N', spline.dim)}, "
+            f"got {tuple(x.shape)}"
+        )
+    # A batch: flattened to Bt elements and projected in one pass (see _project).
+    count = math.prod(batch_shape)
+    flat = spline._replace(
+        control_points=spline.control_points.reshape(count, *spline.control_points.shape[len(batch_shape):]),
+        weights=spline.weights.reshape(count, *spline.weights.shape[len(batch_shape):]),
+        knot_vectors=[kv if kv.ndim == 1 else kv.reshape(count, kv.shape[-1]) for kv in spline.knot_vectors],
+    )
+    warm = None if params is None else torch.as_tensor(params).reshape(count, x.shape[-2], k)
+    res = _project(flat, x.reshape(count, *x.shape[len(batch_shape):]), periodic, warm, count, **options)
+    return Projection(*(z.reshape(batch_shape + z.shape[1:]) for z in res))
 
 
-def _project_one(
-    spline, x: Tensor, periodic, warm, *, grid, starts, iterations, tol, chunk, restart, check_every, validate, second_order
+def _project(
+    spline, x: Tensor, periodic, warm, elements: int | None, *, grid, starts, iterations, tol, chunk, restart,
+    check_every, validate, second_order,
 ):
-    """:func:`project_points` for one (unbatched) spline; points ``(..., N, dim)``."""
-    k = spline.para_dim
-    batch = x.shape[:-1]
-    flat = x.reshape(-1, spline.dim)
-    n = flat.shape[0]
+    """:func:`project_points` on one spline (``elements`` None; points ``(..., N, dim)``) or
+    on a flat batch of ``elements`` splines (control points ``(Bt, ...)``, knots ``(m,)``
+    or ``(Bt, m)``; points ``(Bt, N, dim)``, warm starts ``(Bt, N, k)``).
+
+    A batch is projected in one pass: the start search runs per element (its KD-tree or
+    tiled search reads one element's grid), then the Newton iterations run on the points
+    of every element together, each point evaluating its own element (``element`` rows
+    into the batch's control points), with each element's domain, periodic directions
+    and tolerances, so that every result is the one its element gives alone.
+    """
+    k, dim = spline.para_dim, spline.dim
+    lead = x.shape[:-1]
+    flat = x.reshape(-1, dim)
+    total = flat.shape[0]
+    n = total if elements is None else x.shape[1]  # points per element
     with torch.no_grad():
         xd = flat.detach()
         if validate and not torch.isfinite(xd).all():
             raise NurbskitError("project_points: points contain NaN or infinite values")
         fixed = spline.detach()
         if periodic is None:
-            periodic = periodic_directions(fixed)
+            # one bool per direction; for a batch one per element and direction, kept on the device
+            periodic = periodic_directions(fixed) if elements is None else _periodic_mask(fixed)
         dom = _domain(fixed, periodic)
         eps = torch.finfo(spline.dtype).eps
-        cp = fixed.control_points.reshape(-1, spline.dim)
-        size = (cp.amax(0) - cp.amin(0)).norm()
+        cp = fixed.control_points.reshape(elements or 1, -1, dim)
+        size = (cp.amax(1) - cp.amin(1)).norm(dim=-1)  # (1,) or (Bt,): each element's own scale
         size = torch.where(size > 0, size, torch.ones_like(size))  # a tensor: no host read
+        if elements is None:
+            size = size[0]
         tol_move = (eps ** 0.75 if tol is None else float(tol)) * size
-        params = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
-        if n:
+        noise = eps * size
+        found = torch.empty(0, k, dtype=spline.dtype, device=spline.device)
+        if total:
+            rows, starts_t = [], []
             if warm is not None:
                 w = torch.as_tensor(warm).to(dtype=spline.dtype, device=spline.device).detach()
-                w = w.reshape(n, k)
-                rows, starts_t = torch.arange(n, device=w.device), w
-                if restart:
-                    r2, s2 = _grid_starts(fixed, xd, grid, chunk, starts)
-                    rows, starts_t = torch.cat([rows, r2]), torch.cat([starts_t, s2])
-            else:
-                rows, starts_t = _grid_starts(fixed, xd, grid, chunk, starts)
+                rows.append(torch.arange(total, device=w.device))
+                starts_t.append(w.reshape(total, k))
+            if warm is None or restart:
+                r, t0 = _grid_starts(fixed, xd, grid, chunk, starts, elements)
+                rows.append(r)
+                starts_t.append(t0)
+            rows, starts_t = ((z[0] if len(z) == 1 else torch.cat(z)) for z in (rows, starts_t))
             targets = xd.index_select(0, rows)
+            element = None
+            if elements is not None:  # each start's element, and what differs per element
+                element = torch.div(rows, n, rounding_mode="floor")
+                dom = dom.take(element)
+                tol_move, noise = tol_move.index_select(0, element), noise.index_select(0, element)
             Pw = _tp.homogeneous(fixed.control_points, fixed.weights).contiguous()
+
+            def rows_of(z, i):  # a chunk of a per-start value; shared values pass through
+                return z if z is None or z.ndim == 0 else z[i : i + chunk]
+
             pieces = [
-                _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk], dom, iterations, tol_move,
-                        eps * size, check_every, second_order)
+                _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk],
+                        dom if dom.lo.ndim < 2 else _Domain(*(z[i : i + chunk] for z in dom)), iterations,
+                        rows_of(tol_move, i), rows_of(noise, i), check_every, second_order, rows_of(element, i))
                 for i in range(0, starts_t.shape[0], chunk)
             ]
             found = torch.cat(pieces)
-            params = found[:n]
-            if rows.numel() > n:
+            if rows.numel() > total:
                 # several starts for some points: keep the closest result, without a host read
-                f = (fixed.evaluate(_as_eval(found, k), extrapolate=True) - targets).square().sum(-1)
-                best = torch.full((n,), float("inf"), dtype=f.dtype, device=f.device)
+                C = _tp.derivatives_from_homogeneous(Pw, fixed.knot_vectors, fixed.degrees, found, 0, element)
+                f = (C.reshape(-1, dim) - targets).square().sum(-1)
+                best = torch.full((total,), float("inf"), dtype=f.dtype, device=f.device)
                 best = best.scatter_reduce(0, rows, f, reduce="amin")
                 order = torch.arange(rows.numel(), device=rows.device)
                 # ties: the earliest start wins, deterministically on every device
                 candidate = torch.where(f <= best.index_select(0, rows), order, torch.full_like(order, rows.numel()))
-                choice = torch.full((n,), rows.numel(), dtype=torch.int64, device=rows.device)
+                choice = torch.full((total,), rows.numel(), dtype=torch.int64, device=rows.device)
                 choice = choice.scatter_reduce(0, rows, candidate, reduce="amin")
-                params = found.index_select(0, choice)
-    params = _as_eval(params, k)
-    # params lie in the domain by construction: no domain check (it would read back to the host)
-    closest = spline.evaluate(params, extrapolate=True)
-    distance = (flat - closest).norm(dim=-1)
-    return Projection(
-        params.reshape(batch + params.shape[1:]),
-        closest.reshape(batch + (spline.dim,)),
-        distance.reshape(batch),
-    )
+                found = found.index_select(0, choice)
+    # Foot points with autograd (the envelope theorem; see the module docstring). The
+    # params lie in the domain by construction: no domain check (it would read back to the host).
+    if elements is None:
+        params = _as_eval(found, k)
+        closest = spline.evaluate(params, extrapolate=True)
+        distance = (flat - closest).norm(dim=-1)
+        return Projection(params.reshape(lead + params.shape[1:]), closest.reshape(lead + (dim,)),
+                          distance.reshape(lead))
+    params = _as_eval(found.reshape(elements, n, k), k)
+    closest = spline.evaluate(params, extrapolate=True)  # each element at its own parameters
+    return Projection(params, closest, (x - closest).norm(dim=-1))
 
 
 def project_points_curve(

@@ -237,10 +237,45 @@ def _span_basis(kv: Tensor, p: int, n: int, u: Tensor, order: int | None) -> tup
     return s, basis_function_derivatives(kv, p, s, u, order)
 
 
-def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None) -> Tensor:
+def _scattered_basis(knot_vectors: Sequence[Tensor], degrees: Sequence[int], sizes: Sequence[int], flat: Tensor,
+                     order: int | None) -> list[tuple[Tensor, Tensor]]:
+    """Spans ``(M,)`` and basis values ``(M, o + 1, p + 1)`` per direction at ``flat (M, k)``, shared knots."""
+    k = len(degrees)
+    if k == 1 or len(set(degrees)) > 1:
+        return [_span_basis(knot_vectors[a], degrees[a], sizes[a], flat[:, a], order) for a in range(k)]
+    # One degree: the directions' knot windows stacked, one pass of the recurrence.
+    p = degrees[0]
+    spans = [find_spans(knot_vectors[a], p, sizes[a], flat[:, a], _bounds(knot_vectors[a], p, sizes[a]))
+             for a in range(k)]
+    K = torch.stack([knot_window(knot_vectors[a], p, spans[a]) for a in range(k)])  # (k, M, 2p)
+    bases = window_basis_derivatives(K, p, flat.t(), order or 0).unbind(0)
+    return list(zip(spans, bases))
+
+
+def _element_basis(kv: Tensor, p: int, n: int, u: Tensor, element: Tensor, order: int | None) -> tuple[Tensor, Tensor]:
+    """:func:`_span_basis` of points ``u (M,)`` on the elements ``element (M,)`` of a batch
+    whose knots are ``kv (Bt, m)`` (one vector per element): each point reads its own
+    element's knots (span bounds cached with ``kv``)."""
+    first, last = _bounds(kv, p, n)  # (Bt, 1) each
+    kp = kv.index_select(0, element)  # (M, m)
+    u = u.unsqueeze(-1)
+    s = find_spans(kp, p, n, u, (first.index_select(0, element), last.index_select(0, element)))
+    if order is None:
+        b = basis_functions(kp, p, s, u)  # (M, 1, p + 1): the one value row
+    else:
+        b = basis_function_derivatives(kp, p, s, u, order)[:, 0]
+    return s[:, 0], b
+
+
+def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int | None,
+           element: Tensor | None = None) -> Tensor:
     """Homogeneous values (``order`` None) or derivatives at ``params (*P, M, k)``.
 
     ``Pw (*B, n_1..n_k, D)`` -> ``(*broadcast(B, P), M, [o + 1, ... (k times),] D)``.
+    With ``element (M,)``: ``Pw (Bt, n_1..n_k, D)`` is a flat batch, ``params (M, k)``
+    and point ``i`` lies on element ``element[i]`` (knots shared ``(m,)`` or
+    ``(Bt, m)``) -> ``(M, [o + 1, ...,] D)``: the points of many elements in one call,
+    however they are spread over the batch (a projection's Newton iterations).
     """
     k = len(degrees)
     B = batch_shape(Pw, k)
@@ -249,22 +284,21 @@ def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], p
     P, M = tuple(params.shape[:-2]), params.shape[-2]
     per_element = _per_element(knot_vectors)
     extra = ("scattered", tuple(degrees), sizes, order, B)
-    if not per_element and (not B or not P):
+    if element is not None:
+        if per_element:
+            found = [_element_basis(kv, degrees[a], sizes[a], params[:, a], element, order)
+                     if kv.ndim > 1 else _span_basis(kv, degrees[a], sizes[a], params[:, a], order)
+                     for a, kv in enumerate(knot_vectors)]
+        else:
+            found = _scattered_basis(knot_vectors, degrees, sizes, params, order)
+        offset = element * math.prod(sizes)
+        h = _contract(_gather_blocks(Pw, [s for s, _ in found], degrees, offset), [b for _, b in found])
+    elif not per_element and (not B or not P):
         # One set of parameters for every element: the basis is computed once, and the
         # batch rides along as extra channels of one contraction.
         flat = params.reshape(-1, k)
-
-        def build():
-            if k == 1 or len(set(degrees)) > 1:
-                return [_span_basis(knot_vectors[a], degrees[a], sizes[a], flat[:, a], order) for a in range(k)]
-            # One degree: the directions' knot windows stacked, one pass of the recurrence.
-            p = degrees[0]
-            spans = [find_spans(knot_vectors[a], p, sizes[a], flat[:, a], _bounds(knot_vectors[a], p, sizes[a]))
-                     for a in range(k)]
-            K = torch.stack([knot_window(knot_vectors[a], p, spans[a]) for a in range(k)])  # (k, M, 2p)
-            bases = window_basis_derivatives(K, p, flat.t(), order or 0).unbind(0)
-            return list(zip(spans, bases))
-        found = basis_cache.get([params, *knot_vectors], extra, build)
+        found = basis_cache.get([params, *knot_vectors], extra,
+                                lambda: _scattered_basis(knot_vectors, degrees, sizes, flat, order))
         spans = [s for s, _ in found]
         bases = [b for _, b in found]
         if B:
@@ -370,11 +404,16 @@ def derivatives(
 
 
 def derivatives_from_homogeneous(
-    Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int
+    Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int,
+    element: Tensor | None = None,
 ) -> Tensor:
     """:func:`derivatives` from homogeneous control points ``Pw (*B, n_1..n_k, dim + 1)``
-    formed once by the caller (iterative solvers evaluate the same spline many times)."""
-    return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order), len(degrees))
+    formed once by the caller (iterative solvers evaluate the same spline many times).
+
+    With ``element (M,)``, point ``i`` of ``params (M, k)`` lies on element ``element[i]``
+    of the flat batch ``Pw (Bt, n_1..n_k, dim + 1)`` -> ``(M, o + 1, ..., dim)`` (see
+    :func:`_local`)."""
+    return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order, element), len(degrees))
 
 
 # ---- grids -------------------------------------------------------------------------------------
