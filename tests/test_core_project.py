@@ -493,13 +493,18 @@ def test_batched_surfaces_project_like_a_loop():
         project_points(batch, p[:2])
 
 
-def test_a_batch_keeps_each_elements_periodic_directions():
-    # a closed cylinder beside one whose seam is open (its last control column moved): the
-    # first wraps across the seam, the second stops at its domain edge, each as when alone
+def _closed_and_open_cylinders():
+    """A closed cylinder beside one whose seam is open (its last control columns moved)."""
     s = closed_cylinder()
     opened = s.control_points.clone()
     opened[:, -2:, 2] += 0.25
-    batch = _batched(s, torch.stack([s.control_points, opened]), s.weights.expand(2, 2, 10).clone())
+    return _batched(s, torch.stack([s.control_points, opened]), s.weights.expand(2, 2, 10).clone())
+
+
+def test_a_batch_keeps_each_elements_periodic_directions():
+    # the closed cylinder wraps across the seam, the open one stops at its domain edge,
+    # each as when alone
+    batch = _closed_and_open_cylinders()
     from nurbskit.core.project import periodic_directions
 
     assert [periodic_directions(batch[i]) for i in range(2)] == [(False, True), (False, False)]
@@ -596,6 +601,17 @@ def test_cuda_projection_matches_cpu(dtype, monkeypatch):
     monkeypatch.setattr(P, "_COARSE_PAIRS", 0)
     coarse = project_points(s.to("cuda"), p.cuda())
     assert_close(coarse.distance.cpu(), truth.to(dtype), atol=1e-12 if dtype == F64 else 2e-6)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_batched_projection_matches_cpu():
+    batch = _closed_and_open_cylinders()
+    p, truth = _seam_points()
+    p = torch.stack([p, p])
+    cpu = project_points(batch, p)
+    gpu = project_points(batch.to("cuda"), p.cuda())
+    assert_close(gpu.distance.cpu(), cpu.distance, atol=1e-12)
+    assert_close(gpu.distance[0].cpu(), truth, atol=1e-12)
 
 
 def test_closed_clamped_direction_wraps_across_the_seam():
