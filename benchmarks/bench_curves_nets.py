@@ -22,7 +22,10 @@ Method:
   and the point accuracy is the count read from the averaged stop probabilities.
 - Table 1: on the first ``--refine`` images per mode, the Chamfer to the true curves of
   the network alone, of the network's curves refined by Chamfer against the ink pixels
-  (``nurbskit.curves.classic.refine``, 20 L-BFGS iterations), of a random start refined
+  (``nurbskit.curves.classic.refine``, 20 L-BFGS iterations; the network read as table 2
+  reads it: one start, the paper's protocol), of the network's reading in each of the four
+  views refined the same way and the one closest to the ink kept (``refined_curves``,
+  what ``--method network --refine`` does), of a random start refined
   the same way (the true number of curves, each with n = 4, 5 and 6 control points
   uniform in the image, the best of the three kept by Chamfer to the ink: the paper's
   protocol), and of the classical path (``fit_image``) on the same images.
@@ -33,10 +36,10 @@ Method:
   processes on this shared, loaded machine; the load average is recorded beside it).
 - MNIST: the first ``--mnist`` test digits of ``../shared/data/mnist`` (IDX read by
   ``bench_curves.read_idx_images``), upsampled 4x; per method (each network alone and
-  refined, classical) the Chamfer from the curves to the ink and from the ink to the
-  curves; one overlay figure per mode in ``results/curves_nets_figures/``.
+  refined as ``--method network --refine`` refines it, ``refined_curves``; classical)
+  the Chamfer from the curves to the ink and from the ink to the curves; one overlay figure per mode in ``results/curves_nets_figures/``.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_curves_nets.py [--count 2000] [--refine 20] [--mnist 30]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_curves_nets.py [--count 2000] [--refine 40] [--mnist 30]``.
 """
 
 from __future__ import annotations
@@ -57,7 +60,7 @@ from bench_curves import MNIST, figure, read_idx_images, upsample  # noqa: E402
 
 from nurbskit.curves.classic import chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine  # noqa: E402
 from nurbskit.curves.nets.predict import (  # noqa: E402
-    DEFAULT_VIEWS, load_model, network_curves, predict_unit, read_views, to_curves)
+    DEFAULT_VIEWS, load_model, network_curves, predict_unit, read_views, refined_curves, to_curves)
 from nurbskit.curves.nets.train import LOSSES, _mse, network_inputs  # noqa: E402
 from nurbskit.curves.synthetic import curve_of, dense_samples, make_torch_batch, mode_config  # noqa: E402
 from nurbskit.learn import batch_generator  # noqa: E402
@@ -130,6 +133,9 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
         t = time.perf_counter()
         refined = refine(net, ink, REFINE_ITERS) if net else net
         t_ref = time.perf_counter() - t
+        t = time.perf_counter()
+        views = refined_curves(s.image, ink, mode, False, REFINE_ITERS)
+        t_views = time.perf_counter() - t
         best, best_score = None, float("inf")
         for n in (4, 5, 6):
             start = [curve_of(np.stack([rng.uniform(0, SIZE, n), rng.uniform(0, SIZE, n)], 1))
@@ -140,15 +146,18 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
                 best, best_score = r, score
         classic, _ = fit_image(s.image)
         rows.append({"network": _chamfer(net, truth), "network_refined": _chamfer(refined, truth),
+                     "network_views_refined": _chamfer(views, truth),
                      "random_refined": _chamfer(best, truth), "classic": _chamfer(classic, truth),
-                     "refine_seconds": t_ref})
+                     "refine_seconds": t_ref, "views_refine_seconds": t_views})
     out = {"mode": mode, "images": len(rows)}
-    for key in ("network", "network_refined", "random_refined", "classic"):
+    for key in ("network", "network_refined", "network_views_refined", "random_refined", "classic"):
         vals = [r[key] for r in rows]
         out[f"{key}_mean"] = statistics.fmean(vals)
         out[f"{key}_median"] = statistics.median(vals)
     out["ratio_net_refined_to_random"] = out["network_refined_mean"] / out["random_refined_mean"]
+    out["ratio_views_refined_to_random"] = out["network_views_refined_mean"] / out["random_refined_mean"]
     out["refine_seconds_median"] = statistics.median(r["refine_seconds"] for r in rows)
+    out["views_refine_seconds_median"] = statistics.median(r["views_refine_seconds"] for r in rows)
     return out
 
 
@@ -177,7 +186,7 @@ def mnist(digits: np.ndarray, modes: list[str]):
         for m in modes:
             net = network_curves(image, m, inverted)
             methods[f"network {m}"] = net
-            methods[f"network {m} refined"] = refine(net, ink, REFINE_ITERS) if net else net
+            methods[f"network {m} refined"] = refined_curves(image, ink, m, inverted, REFINE_ITERS)
             if i < 8:
                 examples[m].append((f"#{i} {m}: {len(net)} curve(s)", image, net))
                 examples[m].append((f"#{i} {m} refined", image, methods[f"network {m} refined"]))
@@ -218,7 +227,7 @@ def _merged(rows: list[dict], modes: list[str]) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=2000, help="held-out images per mode (table 2)")
-    parser.add_argument("--refine", type=int, default=20, help="images per mode for table 1 (refinements)")
+    parser.add_argument("--refine", type=int, default=40, help="images per mode for table 1 (refinements)")
     parser.add_argument("--mnist", type=int, default=30, help="MNIST test digits")
     parser.add_argument("--modes", default="V,M,MV")
     args = parser.parse_args()
@@ -254,8 +263,10 @@ def main() -> None:
                ("paper_point_acc", "paper"), ("curve_acc", "curve acc"), ("paper_curve_acc", "paper"),
                ("chamfer_px", "Chamfer px"), ("inference_ms", "ms/image"), ("inference_cpu_ms", "CPU ms/image"),
                ("network_mean", "net"), ("network_refined_mean", "net+refine"),
+               ("network_views_refined_mean", "net (4 views)+refine"),
                ("random_refined_mean", "random+refine"), ("classic_mean", "classic"),
                ("ratio_net_refined_to_random", "net+refine / random"),
+               ("ratio_views_refined_to_random", "net (4 views)+refine / random"),
                ("digits", "digits"), ("curves_to_ink_mean", "curves->ink"), ("ink_to_curves_mean", "ink->curves")]
     write_results("curves_nets", rows, columns, meta={"count": args.count, "refine": args.refine,
                                                       "mnist": args.mnist, "held_out_seed": HELD_OUT_SEED,

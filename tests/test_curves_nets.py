@@ -280,6 +280,57 @@ def test_four_views_of_a_perfect_reading_average_back_to_the_truth(mode):
             assert_close(points[i, c, :m], padded[i, c, :m], atol=2e-7, rtol=0)
 
 
+@pytest.mark.parametrize("mode", ["V", "M", "MV"])
+def test_each_view_of_a_perfect_reading_maps_back_to_the_truth(mode):
+    """``each_view``: every view's own reading, mapped back to the drawing's frame, is the
+    set of true curves (each view lists them in its own order)."""
+    from nurbskit.curves.nets.models import MAX_CURVES, MAX_POINTS
+    from nurbskit.curves.nets.predict import VIEWS, each_view
+
+    batch = make_torch_batch(_gen(18), 6, mode_config(mode, 64))
+    ink, unit = network_inputs(batch, 64)
+    k = 1 if mode == "V" else MAX_CURVES
+    steps = unit.shape[2] if mode == "M" else MAX_POINTS
+    counts = torch.zeros(len(ink), k, dtype=torch.long)
+    counts[:, : batch.counts.shape[1]] = batch.counts[:, :k]
+    padded = torch.zeros(len(ink), k, steps, 2)
+    padded[:, : unit.shape[1], : unit.shape[2]] = unit[:, :k]
+    readings = each_view(_ViewOracle(mode, padded, counts, batch.n_curves, steps), ink)
+    assert len(readings) == len(VIEWS)
+    for view in readings:
+        for i, curves in enumerate(view):
+            assert len(curves) == int(batch.n_curves[i])
+            truth = [padded[i, c, : int(counts[i, c])].double().numpy() for c in range(len(curves))]
+            for t in truth:  # each true curve is read once, exactly, in the canonical orientation
+                assert sum(p.shape == t.shape and np.allclose(p, t, atol=2e-7, rtol=0) for p in curves) == 1
+
+
+def test_refined_curves_keep_the_view_closest_to_the_ink():
+    """The network-initialised refinement (``--method network --refine``) refines each view's
+    reading and keeps the one whose Chamfer to the ink is smallest: the naive loop over the
+    four readings gives the same curves; the first view is the drawing's own reading."""
+    from nurbskit.curves.classic import chamfer_to_ink, ink_mask, refine
+    from nurbskit.curves.nets.predict import each_view, load_model, network_curves, network_ink, refined_curves
+    from nurbskit.curves.nets.predict import to_curves
+
+    sample = make_torch_batch(_gen(19), 1, mode_config("MV", 128)).samples()[0]
+    ink, _ = ink_mask(sample.image)
+    model, meta = load_model("MV")
+    readings = each_view(model, network_ink(sample.image, meta["size"]))
+    own = network_curves(sample.image, "MV")
+    assert len(readings[0][0]) == len(own)
+    for a, b in zip(to_curves(readings[0][0], 128, 128), own):  # one batch of four views: float32 rounding apart
+        assert_close(a.control_points, b.control_points, atol=1e-3, rtol=0)
+    refined = [refine(to_curves(r[0], 128, 128), ink, 5) for r in readings]
+    scores = [chamfer_to_ink(c, ink)["symmetric"] for c in refined]
+    got = refined_curves(sample.image, ink, "MV", False, 5)
+    best = refined[int(np.argmin(scores))]
+    assert len(got) == len(best)
+    for a, b in zip(got, best):
+        assert torch.equal(a.control_points, b.control_points)
+    assert chamfer_to_ink(got, ink)["symmetric"] <= scores[0]
+
+
 def test_views_are_one_or_four():
     from nurbskit.curves.nets.predict import load_model, read_views
 

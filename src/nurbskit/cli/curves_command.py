@@ -54,7 +54,8 @@ def register(subparsers) -> None:
                    help="largest distance in pixels from a stroke's skeleton to its curve (default 1)")
     p.add_argument("--refine", action="store_true",
                    help="refine the control points by Chamfer against the ink pixels (L-BFGS); with --method "
-                        "network the network's curves are the start")
+                        "network the network's readings in four views are the starts, the one closest to the ink "
+                        "kept")
     p.add_argument("--refine-iters", type=int_in(1, 1000), default=20, metavar="N",
                    help="L-BFGS iterations of --refine (default 20)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")

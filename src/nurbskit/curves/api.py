@@ -75,19 +75,19 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
     * ``"classic"``: :func:`nurbskit.curves.classic.fit_image` (skeleton, strokes, least
       squares), refined by Chamfer against the ink when ``refine``; no network.
     * ``"network"``: the shipped ``mode`` network (:mod:`nurbskit.curves.nets.predict`);
-      with ``refine`` its curves start the classical Chamfer refinement
+      with ``refine`` its readings start the classical Chamfer refinement
       (:func:`nurbskit.curves.classic.refine`), the paper's "network-initialised
-      optimisation".
+      optimisation": one reading per view of the drawing (four), each refined, the one
+      closest to the ink kept (:func:`nurbskit.curves.nets.predict.refined_curves`).
     * ``"auto"``: both candidates, the classical curves (refined when ``refine``) and the
       MV network's curves refined by Chamfer (always: unrefined network curves are
-      rarely better), and keeps the one with the smaller symmetric Chamfer distance to the
+      rarely better; as ``"network"`` refines them), and keeps the one with the smaller symmetric Chamfer distance to the
       ink pixels, the measure ``report.json`` gives; a tie goes to the classical curves.
       Why: the classical path wins on drawings unlike the training set (any stroke
       count, open and closed strokes), the refined network where strokes cross and the
       skeleton's junction pairing guesses wrong (see ``benchmarks/results/curves_nets.md``).
     """
     from .classic import Strokes, chamfer_to_ink, even_background, fit_image, ink_mask
-    from .classic import refine as refine_curves
 
     if method not in METHODS:
         raise OptionError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
@@ -101,17 +101,18 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     if method == "hybrid":
         return _hybrid(grey, tolerance, iterations, refine_iterations, source)
-    from .nets.predict import network_curves
+    from .nets.predict import network_curves, refined_curves
 
     grey = even_background(grey)  # as fit_image does for the classical path (a photographed drawing)
     ink, inverted = ink_mask(grey, source)
     if method == "network":
-        curves = network_curves(grey, mode, inverted)
         if iterations:
-            curves = refine_curves(curves, ink, iterations)
+            curves = refined_curves(grey, ink, mode, inverted, iterations)
+        else:
+            curves = network_curves(grey, mode, inverted)
         return curves, Extraction(ink, inverted, None, "network", None)
     classic, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
-    net = refine_curves(network_curves(grey, "MV", inverted), ink, refine_iterations)
+    net = refined_curves(grey, ink, "MV", inverted, refine_iterations)
     score = [chamfer_to_ink(c, ink)["symmetric"] if c else float("inf") for c in (classic, net)]
     if score[1] < score[0]:
         return net, Extraction(ink, inverted, strokes.width, "network", strokes)
