@@ -255,14 +255,12 @@ class _ViewOracle:
         return self.pts[:, : codes.shape[1], :steps], self.point_stop[:, : codes.shape[1], :steps]
 
 
-@pytest.mark.parametrize("mode", ["V", "M", "MV"])
-def test_four_views_of_a_perfect_reading_average_back_to_the_truth(mode):
-    """Each view's reading mapped back and matched to the first view's gives the true curves,
-    their order, number and point counts, exactly (up to float32 rounding of 1 - x)."""
+def _perfect_reader(mode: str, seed: int, count: int):
+    """Drawings of ``mode`` and a :class:`_ViewOracle` reading them: ``(ink, padded true
+    points (B, K, T, 2), counts (B, K), n_curves (B,), oracle)``."""
     from nurbskit.curves.nets.models import MAX_CURVES, MAX_POINTS
-    from nurbskit.curves.nets.predict import read_views
 
-    batch = make_torch_batch(_gen(17), 12, mode_config(mode, 64))
+    batch = make_torch_batch(_gen(seed), count, mode_config(mode, 64))
     ink, unit = network_inputs(batch, 64)
     k = 1 if mode == "V" else MAX_CURVES
     steps = unit.shape[2] if mode == "M" else MAX_POINTS
@@ -270,9 +268,18 @@ def test_four_views_of_a_perfect_reading_average_back_to_the_truth(mode):
     counts[:, : batch.counts.shape[1]] = batch.counts[:, :k]
     padded = torch.zeros(len(ink), k, steps, 2)
     padded[:, : unit.shape[1], : unit.shape[2]] = unit[:, :k]
-    oracle = _ViewOracle(mode, padded, counts, batch.n_curves, steps)
+    return ink, padded, counts, batch.n_curves, _ViewOracle(mode, padded, counts, batch.n_curves, steps)
+
+
+@pytest.mark.parametrize("mode", ["V", "M", "MV"])
+def test_four_views_of_a_perfect_reading_average_back_to_the_truth(mode):
+    """Each view's reading mapped back and matched to the first view's gives the true curves,
+    their order, number and point counts, exactly (up to float32 rounding of 1 - x)."""
+    from nurbskit.curves.nets.predict import read_views
+
+    ink, padded, counts, n_curves, oracle = _perfect_reader(mode, 17, 12)
     points, curves, n = read_views(oracle, ink, 4)
-    assert curves.tolist() == batch.n_curves.tolist()
+    assert curves.tolist() == n_curves.tolist()
     for i in range(len(ink)):
         for c in range(int(curves[i])):
             m = int(counts[i, c])
@@ -284,22 +291,14 @@ def test_four_views_of_a_perfect_reading_average_back_to_the_truth(mode):
 def test_each_view_of_a_perfect_reading_maps_back_to_the_truth(mode):
     """``each_view``: every view's own reading, mapped back to the drawing's frame, is the
     set of true curves (each view lists them in its own order)."""
-    from nurbskit.curves.nets.models import MAX_CURVES, MAX_POINTS
     from nurbskit.curves.nets.predict import VIEWS, each_view
 
-    batch = make_torch_batch(_gen(18), 6, mode_config(mode, 64))
-    ink, unit = network_inputs(batch, 64)
-    k = 1 if mode == "V" else MAX_CURVES
-    steps = unit.shape[2] if mode == "M" else MAX_POINTS
-    counts = torch.zeros(len(ink), k, dtype=torch.long)
-    counts[:, : batch.counts.shape[1]] = batch.counts[:, :k]
-    padded = torch.zeros(len(ink), k, steps, 2)
-    padded[:, : unit.shape[1], : unit.shape[2]] = unit[:, :k]
-    readings = each_view(_ViewOracle(mode, padded, counts, batch.n_curves, steps), ink)
+    ink, padded, counts, n_curves, oracle = _perfect_reader(mode, 18, 6)
+    readings = each_view(oracle, ink)
     assert len(readings) == len(VIEWS)
     for view in readings:
         for i, curves in enumerate(view):
-            assert len(curves) == int(batch.n_curves[i])
+            assert len(curves) == int(n_curves[i])
             truth = [padded[i, c, : int(counts[i, c])].double().numpy() for c in range(len(curves))]
             for t in truth:  # each true curve is read once, exactly, in the canonical orientation
                 assert sum(p.shape == t.shape and np.allclose(p, t, atol=2e-7, rtol=0) for p in curves) == 1
