@@ -26,7 +26,8 @@ Method:
   ink), ``--refined`` images per count.
 - Real digits, each by four methods through ``nurbskit.curves.api.extract``: ``hybrid``
   (the default), ``classic`` (no network), ``classic refined`` (20 L-BFGS iterations on the Chamfer to the ink) and
-  ``network MV refined`` (the shipped MV network's curves as the start of that refinement).
+  ``network MV refined`` (the shipped MV network's readings in its four views, each the start
+  of that refinement, the one closest to the ink kept: ``predict.refined_curves``).
   MNIST: the first ``--mnist`` test digits of ``../shared/data/mnist`` (IDX read with
   numpy; white on black, detected), upsampled 4x (bilinear, 112 x 112). scikit-learn's
   bundled digits (``sklearn.datasets.load_digits``, 8 x 8, 0..16; the first ``--mnist``),
@@ -401,8 +402,9 @@ def report(summary: list[dict], args, skipped: dict[str, str], per_image: list[d
     lines += ["The digits' truth is the ink itself: ink->curves includes the half-width of the stroke "
               "(4x MNIST strokes are 10-18 px wide), so it cannot fall below about a quarter of the width.", "",
               "Methods on the digits: `hybrid` (the default), `classic` (no network), `classic refined` (20 L-BFGS iterations on "
-              "the Chamfer to the ink), `network MV refined` (the shipped MV network's curves as the start "
-              "of the same refinement), each through `nurbskit.curves.api.extract`. The goal is for the "
+              "the Chamfer to the ink), `network MV refined` (the shipped MV network's readings in its four "
+              "views, each the start of the same refinement, the one closest to the ink kept), each through "
+              "`nurbskit.curves.api.extract`. The goal is for the "
               "default method; the issue's 2.5 px is read for both digit sets.", "",
               "Overlays: `curves_figures/overlays.png` (synthetic and MNIST), "
               "`curves_figures/digits_<method>.png` (MNIST and scikit-learn digits, per method).", ""]
