@@ -80,10 +80,10 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       optimisation": one reading per view of the drawing (four), each refined, the one
       closest to the ink kept (:func:`nurbskit.curves.nets.predict.refined_curves`).
     * ``"auto"``: both candidates, the classical curves (refined when ``refine``) and the
-      MV network's curves refined by Chamfer (always: unrefined network curves are
-      rarely better; as ``"network"`` refines them), and keeps the one with the smaller symmetric Chamfer distance to the
-      ink pixels, the measure ``report.json`` gives; a tie goes to the classical curves.
-      Why: the classical path wins on drawings unlike the training set (any stroke
+      MV network's curves refined by Chamfer as ``"network"`` refines them (always:
+      unrefined network curves are rarely better), and keeps the one with the smaller
+      symmetric Chamfer distance to the ink pixels, the measure ``report.json`` gives; a
+      tie goes to the classical curves. Why: the classical path wins on drawings unlike the training set (any stroke
       count, open and closed strokes), the refined network where strokes cross and the
       skeleton's junction pairing guesses wrong (see ``benchmarks/results/curves_nets.md``).
     """

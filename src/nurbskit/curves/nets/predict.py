@@ -232,8 +232,9 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
     cross, a reading a few pixels off locks onto the wrong stroke. The four readings
     differ (a recurrent decoder's errors depend on the direction it emits in), and one
     of them is often in the right basin: on 40 held-out drawings per mode the refined
-    Chamfer to the true curves fell from 1.33 to 1.01 px (M), 1.35 to 1.03 px (MV) and
-    0.48 to 0.29 px (V) against refining the one reading (``benchmarks/results/curves_nets.md``).
+    Chamfer to the true curves fell from 1.40 to 1.08 px (M), 1.25 to 0.98 px (MV) and
+    0.53 to 0.39 px (V) against refining the reading :func:`network_curves` gives
+    (``benchmarks/results/curves_nets.md``, table 1).
     """
     from ..classic import chamfer_to_ink, refine
 
