@@ -501,6 +501,19 @@ def _closed_and_open_cylinders():
     return _batched(s, torch.stack([s.control_points, opened]), s.weights.expand(2, 2, 10).clone())
 
 
+def test_a_batch_searched_coarse_to_fine_projects_like_a_loop(monkeypatch):
+    # the accelerators' start search for large inputs, forced on the CPU: per element
+    from nurbskit.core import project as P
+
+    monkeypatch.setattr(P, "_use_coarse", lambda device, pairs: True)
+    base = smooth_height_field(54)
+    g = torch.Generator().manual_seed(54)
+    cps = base.control_points + 0.05 * torch.randn((3,) + base.control_points.shape, dtype=F64, generator=g)
+    batch = _batched(base, cps, base.weights.expand((3,) + base.weights.shape).clone())
+    p = torch.rand(3, 60, 3, dtype=F64, generator=g) * torch.tensor([2.0, 2.0, 0.4]) - torch.tensor([0.0, 1.0, 0.2])
+    _assert_like_each_alone(project_points(batch, p), _each_alone(batch, p))
+
+
 def test_a_batch_keeps_each_elements_periodic_directions():
     # the closed cylinder wraps across the seam, the open one stops at its domain edge,
     # each as when alone

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from nurbskit.errors import NurbskitError
 from nurbskit.core import neighbors
-from nurbskit.core.neighbors import nearest_neighbors, nearest_neighbors_naive
+from nurbskit.core.neighbors import k_nearest, nearest_neighbors, nearest_neighbors_naive
 
 
 def _clouds(n, m, d, seed, dtype=torch.float64):
@@ -82,6 +82,31 @@ def test_chunked_cdist_kernel_matches_naive(chunk_bytes):
     q, r = _clouds(37, 29, 3, seed=5)
     idx = neighbors._index_cdist(q, r, chunk_bytes)
     assert torch.equal(idx, nearest_neighbors_naive(q, r)[1])
+
+
+@pytest.mark.parametrize("chunk_bytes", [1, 8 * 29 * 3, 8 * 37 * 29 * 2, 10**9])
+def test_chunked_cdist_kernel_on_a_batch_matches_naive(chunk_bytes):
+    # A batch of clouds in the same tiles: row tiles of one element, one element per tile,
+    # two elements per tile, the whole batch at once; each element against its own reference.
+    q = torch.stack([_clouds(37, 29, 3, seed=s)[0] for s in range(5)])
+    r = torch.stack([_clouds(37, 29, 3, seed=10 + s)[1] for s in range(5)])
+    idx = neighbors._index_cdist(q, r, chunk_bytes)
+    top = neighbors._index_cdist(q, r, chunk_bytes, count=3)
+    assert idx.shape == (5, 37) and top.shape == (5, 37, 3)
+    for e in range(5):
+        assert torch.equal(idx[e], nearest_neighbors_naive(q[e], r[e])[1])
+        full = ((q[e][:, None] - r[e][None]) ** 2).sum(-1)
+        assert torch.equal(top[e], full.topk(3, dim=-1, largest=False).indices)
+    # k_nearest takes the batch too (a KD-tree per element on the CPU): the same answer
+    assert torch.equal(k_nearest(q, r, 3), top)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_batch_matches_cpu():
+    q = torch.stack([_clouds(500, 300, 3, seed=s)[0] for s in range(4)])
+    r = torch.stack([_clouds(500, 300, 3, seed=20 + s)[1] for s in range(4)])
+    assert torch.equal(k_nearest(q.cuda(), r.cuda(), 2).cpu(), k_nearest(q, r, 2))
+    assert torch.equal(nearest_neighbors(q.cuda(), r.cuda())[1].cpu(), nearest_neighbors(q, r)[1])
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")

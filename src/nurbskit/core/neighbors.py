@@ -67,36 +67,44 @@ def _check_finite_numpy(name: str, a: np.ndarray) -> None:
 
 
 def _tile_sq_dists(q: Tensor, r: Tensor) -> Tensor:
-    """Exact squared distances ``(rows, M)`` of a tile, difference first, one coordinate
-    at a time (``rows x M`` memory, never ``rows x M x D``); no GEMM shortcut."""
-    d = (q[:, None, 0] - r[None, :, 0]).square()
-    for c in range(1, q.shape[1]):
-        d.add_((q[:, None, c] - r[None, :, c]).square())
+    """Exact squared distances ``(*, rows, M)`` of a tile, ``q (*, rows, D)`` against
+    ``r (*, M, D)``, difference first, one coordinate at a time (``rows x M`` memory per
+    element, never ``rows x M x D``); no GEMM shortcut."""
+    d = (q[..., :, None, 0] - r[..., None, :, 0]).square()
+    for c in range(1, q.shape[-1]):
+        d.add_((q[..., :, None, c] - r[..., None, :, c]).square())
     return d
 
 
 def _index_cdist(query: Tensor, reference: Tensor, chunk_bytes: int, count: int = 1) -> Tensor:
-    """Indices ``(N,)`` (``(N, count)`` when ``count > 1``) of the nearest reference rows.
+    """Indices ``(*, N)`` (``(*, N, count)`` when ``count > 1``) of the nearest reference rows.
 
-    Tiles of query rows against the whole reference, each holding at most ``chunk_bytes``
-    of distances, with the exact difference-first distance (:func:`_tile_sq_dists`; the
-    running minimum is the per-tile ``argmin``); no host read. (``torch.cdist``'s direct
-    kernel is exact too but measured at under 1e9 pairs/s on an H100.)
+    ``query (*, N, D)``, ``reference (*, M, D)`` with the same leading batch shape: every
+    element against its own reference, all elements in one tile (a batch of small clouds
+    costs the launches of one). Tiles hold at most ``chunk_bytes`` of distances: whole
+    elements when one fits, else query rows of one element at a time, with the exact
+    difference-first distance (:func:`_tile_sq_dists`; the running minimum is the
+    per-tile ``argmin``); no host read. (``torch.cdist``'s direct kernel is exact too but
+    measured at under 1e9 pairs/s on an H100.)
     """
-    n, m = query.shape[0], reference.shape[0]
+    lead = query.shape[:-2]
+    n, m, dim = query.shape[-2], reference.shape[-2], query.shape[-1]
+    b = math.prod(lead)
     count = min(count, m)
-    per_row = max(1, m * query.element_size())
-    rows = max(1, int(chunk_bytes // per_row))
-    q, r = query.detach(), reference.detach()
-    shape = (n,) if count == 1 else (n, count)
+    q, r = query.detach().reshape(b, n, dim), reference.detach().reshape(b, m, dim)
+    per_element = max(1, n * m * query.element_size())
+    elements = max(1, int(chunk_bytes // per_element))  # whole elements per tile
+    rows = n if elements > 1 or per_element <= chunk_bytes else max(1, int(chunk_bytes // (m * query.element_size())))
+    shape = (b, n) if count == 1 else (b, n, count)
     out = torch.empty(shape, dtype=torch.int64, device=query.device)
-    for start in range(0, n, rows):
-        d = _tile_sq_dists(q[start : start + rows], r)
-        if count == 1:
-            out[start : start + rows] = d.argmin(dim=-1)
-        else:
-            out[start : start + rows] = d.topk(count, dim=-1, largest=False).indices
-    return out
+    for e in range(0, b, elements):
+        for start in range(0, n, rows):
+            d = _tile_sq_dists(q[e : e + elements, start : start + rows], r[e : e + elements])
+            if count == 1:
+                out[e : e + elements, start : start + rows] = d.argmin(dim=-1)
+            else:
+                out[e : e + elements, start : start + rows] = d.topk(count, dim=-1, largest=False).indices
+    return out.reshape(lead + out.shape[1:])
 
 
 PARALLEL_QUERY_MIN = 20_000  # neighbours (queries x k) below which one thread answers
@@ -194,7 +202,8 @@ def nearest_neighbors(
 
     Shapes: ``query (*, N, D)``, ``reference (*, M, D)`` with the same leading batch
     shape ``*`` -> ``sq_dist (*, N)`` (query dtype), ``index (*, N)`` int64 into the
-    reference's point axis. Batch elements are searched one after another.
+    reference's point axis. On CPU the batch elements are searched one after another
+    (one KD-tree each); on CUDA all together, in the same tiles.
 
     On CPU (and any non-CUDA device) a KD-tree (:func:`kdtree`) is built on the
     reference and queried with ``workers`` threads (``-1``: all cores). On CUDA the
@@ -224,20 +233,34 @@ def nearest_neighbors(
     b = math.prod(batch)
     qf = query.detach().reshape(b, n, d)
     rf = reference.detach().reshape(b, m, d)
-    index = torch.stack(
-        [NeighborIndex(rb, workers=workers, chunk_bytes=chunk_bytes).indices(qb) for qb, rb in zip(qf, rf)]
-    ) if b else torch.empty(qf.shape[:2], dtype=torch.int64, device=query.device)
+    index = _batch_indices(qf, rf, 1, workers, chunk_bytes)
     with torch.no_grad():
         nearest = torch.gather(rf, 1, index.unsqueeze(-1).expand(-1, -1, d))
         sq_dist = ((qf - nearest) ** 2).sum(-1)
     return sq_dist.reshape(*batch, n), index.reshape(*batch, n)
 
 
-def k_nearest(query: Tensor, reference: Tensor, k: int, *, chunk_bytes: int = CUDA_CHUNK_BYTES) -> Tensor:
-    """Indices ``(N, min(k, M))`` of the ``k`` nearest rows of ``reference (M, D)``, nearest first.
+def _batch_indices(q: Tensor, r: Tensor, k: int, workers: int, chunk_bytes: int) -> Tensor:
+    """Indices ``(B, N)`` (``(B, N, k)`` for ``k > 1``) of the nearest rows of each ``r[b]
+    (M, D)`` for ``q[b] (N, D)``: a KD-tree per element on CPU, one tiled search for the
+    whole batch on CUDA."""
+    b, n = q.shape[:2]
+    shape = (b, n) if k == 1 else (b, n, k)
+    if b == 0 or n == 0:
+        return torch.empty(shape, dtype=torch.int64, device=q.device)
+    if q.device.type == "cuda":
+        return _index_cdist(q, r, chunk_bytes, k)
+    return torch.stack([NeighborIndex(rb, workers=workers, chunk_bytes=chunk_bytes).indices(qb, k)
+                        for qb, rb in zip(q, r)])
 
-    Shapes: ``query (N, D)``, ``reference (M, D)``. KD-tree on CPU, tiled exact
-    distances on CUDA (as :func:`nearest_neighbors`).
+
+def k_nearest(query: Tensor, reference: Tensor, k: int, *, chunk_bytes: int = CUDA_CHUNK_BYTES) -> Tensor:
+    """Indices ``(*, N, min(k, M))`` of the ``k`` nearest rows of ``reference (*, M, D)``,
+    nearest first.
+
+    Shapes: ``query (*, N, D)``, ``reference (*, M, D)`` with the same leading batch
+    shape ``*`` (none for one cloud). KD-tree on CPU, tiled exact distances on CUDA (as
+    :func:`nearest_neighbors`; a batch in the same tiles).
 
     Example:
         >>> import torch
@@ -245,9 +268,14 @@ def k_nearest(query: Tensor, reference: Tensor, k: int, *, chunk_bytes: int = CU
         [[1, 2]]
     """
     _check_pair(query, reference)
-    k = min(int(k), reference.shape[0])
-    idx = NeighborIndex(reference, chunk_bytes=chunk_bytes).indices(query, k)
-    return idx.reshape(query.shape[0], k)
+    k = min(int(k), reference.shape[-2])
+    if query.ndim == 2:
+        idx = NeighborIndex(reference, chunk_bytes=chunk_bytes).indices(query, k)
+        return idx.reshape(query.shape[0], k)
+    batch, n, d, m = query.shape[:-2], query.shape[-2], query.shape[-1], reference.shape[-2]
+    b = math.prod(batch)
+    idx = _batch_indices(query.detach().reshape(b, n, d), reference.detach().reshape(b, m, d), k, -1, chunk_bytes)
+    return idx.reshape(batch + (n, k))
 
 
 def nearest_neighbors_naive(query: Tensor, reference: Tensor) -> tuple[Tensor, Tensor]:

@@ -305,9 +305,9 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1,
     number of starts independent of the data (no host read per point).
 
     A flat batch of ``elements`` splines takes ``points (Bt * N, dim)``, element by
-    element: the grids of all elements are evaluated in one call and their degenerate
-    samples found together (one host read); the nearest-sample search then runs per
-    element, on that element's grid, and ``rows`` index the flat points.
+    element: the grids of all elements are evaluated in one call, their degenerate
+    samples found together (one host read), and the nearest samples searched in one
+    call (each element's points in its own grid); ``rows`` index the flat points.
     """
     res = _resolution(spline, grid)
     axes = spline.grid_axes(res)  # (R_a,), or (Bt, R_a) for per-element knots
@@ -328,22 +328,28 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1,
     degenerate = (~regular.all(-1) & regular.any(-1)).reshape(-1).tolist()  # per grid: the one host read
     x = points.detach().to(samples.dtype)
     n = x.shape[0] // (elements or 1)
+    xs = x if elements is None else x.view(elements, n, dim)
+    if starts == 1 and _use_coarse(samples.device, n * samples.shape[-2]):
+        idx = (_coarse_to_fine(samples, res, x) if elements is None else
+               torch.stack([_coarse_to_fine(samples[e], res, xs[e]) for e in range(elements)]))[..., None]
+    else:  # a batch in one call: one KD-tree per element on the CPU, the same tiles on CUDA
+        idx = k_nearest(xs, samples, starts).to(table.device)  # (*lead, N, count)
+    own = torch.arange(x.shape[0], device=table.device)
     rows, t0 = [], []
-    for e in range(elements or 1):
-        S, T, xe = (samples, table, x) if elements is None else (samples[e], table[e], x[e * n : (e + 1) * n])
-        if starts == 1 and _use_coarse(S.device, n * S.shape[0]):
-            idx = _coarse_to_fine(S, res, xe)[:, None]
+    for j in range(idx.shape[-1]):  # the j-th nearest sample of every point
+        rows.append(own)
+        if elements is None:
+            t0.append(table.index_select(0, idx[:, j]))
         else:
-            idx = k_nearest(xe, S, starts).to(T.device)  # (N, count)
-        own = torch.arange(e * n, (e + 1) * n, device=T.device)
-        rows += [own] * idx.shape[1]
-        t0 += [T.index_select(0, idx[:, j]) for j in range(idx.shape[1])]
-        if degenerate[e]:
-            keep = torch.nonzero(regular if elements is None else regular[e]).reshape(-1)
-            sub = k_nearest(xe, S.index_select(0, keep), 1)[:, 0]
-            rows.append(own)
+            t0.append(torch.gather(table, 1, idx[..., j : j + 1].expand(-1, -1, k)).reshape(-1, k))
+    for e, extra in enumerate(degenerate):
+        if extra:  # every point of the element also starts from its nearest regular sample
+            S, T, R = (samples, table, regular) if elements is None else (samples[e], table[e], regular[e])
+            keep = torch.nonzero(R).reshape(-1)
+            sub = k_nearest(xs if elements is None else xs[e], S.index_select(0, keep), 1)[:, 0]
+            rows.append(own[e * n : (e + 1) * n])
             t0.append(T.index_select(0, keep.index_select(0, sub)))
-    # element-major; each element's starts in the order a single spline gives them
+    # within each element, its starts in the order a single spline gives them
     return torch.cat(rows), torch.cat(t0)
 
 
