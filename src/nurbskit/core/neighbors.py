@@ -12,6 +12,8 @@ which gives the exact gradient wherever the nearest neighbour is unique.
   ``O((N + M) * D)``: no ``N x M`` matrix is ever built.
 * **CUDA**: exact distances over tiles of query rows (at most ``chunk_bytes`` of
   distances per tile) reduced by ``argmin`` per tile: a few kernels per tile, no host read.
+  A batch of clouds (``(B, N, D)`` against ``(B, M, D)``) shares the tiles: whole
+  elements per tile where they fit, so many small searches cost the launches of one.
 
 Convention (the cancellation-safe distance, everywhere): distances are differences
 first, squares second, ``sum_d (q_d - r_d)^2``. The GEMM shortcut
