@@ -576,7 +576,9 @@ def test_volume_tab(page):
         set_number(page, "Cost grid per axis", 12)
         set_number(page, "Iterations", 10)
 
-    settle(apply, lambda: tab.iters.value == 10 and tab.control.value == 8, "the settings")
+    # every typed value held by the server (typed key by key, "12" is first "1")
+    settle(apply, lambda: tab.iters.value == 10 and tab.control.value == 8 and tab.grid.value == 12,
+           "the settings", held=lambda: (tab.iters.value, tab.control.value, tab.grid.value))
     page.get_by_role("button", name="Fit volume").click()
     see(page, "IoU front", 60000)
     assert tab.fit is not None and not tab.fit.mesh.is_empty
