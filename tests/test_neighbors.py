@@ -99,6 +99,7 @@ def test_chunked_cdist_kernel_on_a_batch_matches_naive(chunk_bytes):
         assert torch.equal(top[e], full.topk(3, dim=-1, largest=False).indices)
     # k_nearest takes the batch too (a KD-tree per element on the CPU): the same answer
     assert torch.equal(k_nearest(q, r, 3), top)
+    assert neighbors._index_cdist(q[:, :0], r, chunk_bytes).shape == (5, 0)  # no query points
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")

@@ -96,7 +96,10 @@ def _index_cdist(query: Tensor, reference: Tensor, chunk_bytes: int, count: int 
     q, r = query.detach().reshape(b, n, dim), reference.detach().reshape(b, m, dim)
     per_element = max(1, n * m * query.element_size())
     elements = max(1, int(chunk_bytes // per_element))  # whole elements per tile
-    rows = n if elements > 1 or per_element <= chunk_bytes else max(1, int(chunk_bytes // (m * query.element_size())))
+    if elements > 1 or per_element <= chunk_bytes:
+        rows = max(n, 1)  # whole elements (an empty query makes no tile)
+    else:
+        rows = max(1, int(chunk_bytes // (m * query.element_size())))
     shape = (b, n) if count == 1 else (b, n, count)
     out = torch.empty(shape, dtype=torch.int64, device=query.device)
     for e in range(0, b, elements):
