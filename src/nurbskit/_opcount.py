@@ -4,7 +4,10 @@ Every aten operation dispatched inside :class:`OperationCounter` is counted; tho
 read a value back to the host (``.item()``, ``bool(tensor)``, ``torch.equal``) or make a
 data-dependent shape (``nonzero``, boolean-mask indexing, ``unique``) are also counted as
 *host reads*. On a GPU each operation is a kernel launch and each host read a stream
-synchronisation, so these counts are the device-independent evidence of overhead.
+synchronisation, so these counts are the device-independent evidence of overhead. View
+operations (``view``, ``expand``, ``slice``, ``unbind``, ...: the schema says the output
+aliases the input) launch nothing; they are counted apart as ``views``, and
+``kernels = operations - views`` is the closer count of launches.
 
 >>> import torch
 >>> x = torch.arange(4.0)
@@ -15,6 +18,10 @@ synchronisation, so these counts are the device-independent evidence of overhead
 1
 >>> count.operations >= 3
 True
+>>> with OperationCounter() as count:
+...     _ = x.view(2, 2).t()
+>>> count.views, count.kernels
+(2, 0)
 """
 
 from __future__ import annotations
@@ -64,6 +71,7 @@ class OperationCounter(TorchDispatchMode):
 
     Attributes:
         operations: number of aten operations dispatched.
+        views: how many of them were views (``OpOverload.is_view``: no kernel, no memory).
         host_reads: how many of them read back to the host or had a data-dependent shape.
         by_name: ``collections.Counter`` of operation names (``"aten.mm"``, ...).
         host_reads_by_name: the same for host reads (boolean-mask indexing is named
@@ -75,16 +83,23 @@ class OperationCounter(TorchDispatchMode):
         self.by_name: Counter = Counter()
         self.host_reads_by_name: Counter = Counter()
         self.operations = 0
+        self.views = 0
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         name = _name(func)
         self.by_name[name] += 1
         self.operations += 1
+        self.views += bool(getattr(func, "is_view", False))
         if name in HOST_READ_OPS:
             self.host_reads_by_name[name] += 1
         elif name in _MASK_INDEX_OPS and _has_bool_index(args):
             self.host_reads_by_name[name + " (boolean mask)"] += 1
         return func(*args, **(kwargs or {}))
+
+    @property
+    def kernels(self) -> int:
+        """Operations that are not views: about the launches a GPU would make."""
+        return self.operations - self.views
 
     @property
     def host_reads(self) -> int:
@@ -99,6 +114,7 @@ class OperationCounter(TorchDispatchMode):
         """JSON-ready counts: operations, host reads, and the ten most frequent names."""
         return {
             "operations": self.operations,
+            "kernels": self.kernels,
             "host_reads": self.host_reads,
             "host_read_ops": self.host_read_names(),
             "top": dict(self.by_name.most_common(10)),
