@@ -139,6 +139,17 @@ def test_stl_refuses_coordinates_beyond_float32(tmp_path):
 
 # ---- output folders -------------------------------------------------------------------------------
 
+def test_train_refuses_a_foreign_folder_before_it_starts(tmp_path, capsys):
+    """`train curves --out` on a folder of the user's: one line, no progress bar, the file kept."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    rc, _, err = run(capsys, "train", "curves", "--mode", "V", "--steps", "2", "--out", out, "--overwrite")
+    assert rc == 2 and err.count("\n") == 1 and "did not write (keep.txt" in err
+    assert "step" not in err  # refused before the training (and its progress bar) started
+    assert [p.name for p in out.iterdir()] == ["keep.txt"] and (out / "keep.txt").read_text() == "mine"
+
+
 def test_fit_with_out_on_the_input_folder_and_overwrite_deletes_nothing(tmp_path, capsys):
     """The issue's data loss: `fit data/scan.xyz --out data --overwrite` deleted the whole folder."""
     data = tmp_path / "data"

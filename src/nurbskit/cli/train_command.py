@@ -88,8 +88,11 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     """
     import torch
 
+    from .._fs import check_output_dir
     from ..learn import train
 
+    if not args.resume:  # refused before any work or progress bar (train() checks again as it starts)
+        check_output_dir(args.out, args.overwrite)
     if args.threads:
         torch.set_num_threads(args.threads)
     meta = dict(meta, command="nurbskit " + " ".join(shlex.quote(a) for a in sys.argv[1:] if a != "--quiet"),
