@@ -25,13 +25,22 @@ Loop overhead (the batch part): the loop's per-surface cost beyond the arithmeti
 2 x 2 grid, and the ceiling ``(arithmetic + 64 x overhead) / arithmetic`` it allows the
 batch-vs-loop ratio (see ``loop_overhead``).
 
-Usage: python benchmarks/bench_core_eval.py [--quick] [--device cpu|cuda] [--threads N] [--only grids|batch] [--peer PATH]
+Page faults (the batch part, where ``resource`` exists): minor faults per call of each
+fwd+bwd, counted over 20 calls after warm-up. The batch's buffers (16.8 MB for the
+homogeneous grid, 12.6 MB for the samples and each of the loss's tensors) lie above
+glibc's mmap threshold, so the allocator can hand their pages back to the kernel between
+calls and each call faults them in again (zeroed); each loop element's buffers (about
+260 KB) are reused from the heap. See ``benchmarks/README.md`` for what that costs and
+the allocator settings that avoid it.
+
+Usage: python benchmarks/bench_core_eval.py [--quick] [--device cpu|cuda] [--threads N] [--only grids|batch] [--peer PATH] [--tag NAME]
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from pathlib import Path
 
@@ -262,6 +271,21 @@ def loop_overhead(batch, singles, cp, w, r: int, reps: int, sync) -> dict:
     }
 
 
+def faults_per_call(fn, calls: int = 20) -> float | None:
+    """Minor page faults of this process per call of ``fn`` (after two warm-up calls); None
+    where the ``resource`` module is missing (Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    for _ in range(2):
+        fn()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(calls):
+        fn()
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / calls
+
+
 def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
     """64 surfaces of 16 x 16 at 128^2: one batched call against a loop over the surfaces."""
     sync = torch.cuda.synchronize if device.startswith("cuda") else None
@@ -283,6 +307,8 @@ def run_batch(quick: bool, device: str, SurfEval) -> list[dict]:
            "batched_fwd_bwd_ms": timeit(calls["bfb"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
            "looped_fwd_bwd_ms": timeit(calls["lfb"], repeats=reps, min_time=0.05, sync=sync) * 1e3,
            "max_abs_diff_batch_vs_loop": diff}
+    row["batched_faults_per_call"] = faults_per_call(calls["bfb"])
+    row["looped_faults_per_call"] = faults_per_call(calls["lfb"])
     row["x_loop_forward"] = row["looped_forward_ms"] / row["batched_forward_ms"]
     row["x_loop_fwd_bwd"] = row["looped_fwd_bwd_ms"] / row["batched_fwd_bwd_ms"]
     row.update(loop_overhead(batch, singles, cp, w, r, reps, sync))
@@ -306,6 +332,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--peer", type=Path, default=DEFAULT_PEER, help="folder holding NURBSDiff (NURBS-Diff v2)")
     parser.add_argument("--only", choices=["grids", "batch"], help="run one part (writes only its results file)")
+    parser.add_argument("--tag", default="", help="appended to the results files' names (a run under other settings)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     SurfEval, reason = load_peer(args.peer)
@@ -314,8 +341,9 @@ def main() -> None:
     rows = run_grids(args.quick, args.device, SurfEval, reason) if args.only != "batch" else []
     batch_rows = run_batch(args.quick, args.device, SurfEval) if args.only != "grids" else []
     subdir = "gpu" if args.device == "cuda" else ""
-    suffix = "_quick" if args.quick else ""
-    meta = {"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3,
+    suffix = ("_quick" if args.quick else "") + (f"_{args.tag}" if args.tag else "")
+    allocator = {k: v for k, v in os.environ.items() if k.startswith("MALLOC_") or k == "LD_PRELOAD"}
+    meta = {"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3, "allocator_env": allocator,
             "nurbsdiff": "ok" if SurfEval is not None else f"skipped: {reason}"}
     columns = [("control", "control"), ("grid", "grid"), ("forward_ms", "forward ms"),
                ("fwd_bwd_ms", "fwd+bwd ms (P, w)"), ("fwd_bwd_knots_ms", "fwd+bwd ms (P, w, knots)"),
@@ -343,13 +371,16 @@ def main() -> None:
                        ("ceiling_x_loop_fwd_bwd", "ceiling x loop (fwd+bwd)"),
                        ("ceiling_x_loop_fwd", "ceiling x loop (fwd)"),
                        ("nurbsdiff_fwd_bwd_ms", "NURBS-Diff fwd+bwd ms"),
+                       ("batched_faults_per_call", "page faults/call, batched fwd+bwd"),
+                       ("looped_faults_per_call", "page faults/call, looped fwd+bwd"),
                        ("max_abs_diff_batch_vs_loop", "max |batch - loop|")],
                       meta=meta, title="A batch of 64 surfaces against a loop, float32", subdir=subdir,
                       notes="One NURBSSurface with control points (64, 16, 16, 3) sampled on 128^2, against a "
                             "Python loop over the 64 single surfaces; forward + backward to control points and weights. "
                             "Loop overhead: the loop's time on a 2 x 2 grid less the batch's, per surface; arithmetic: "
                             "the batch at 128^2 less the batch at 2 x 2; ceiling = (arithmetic + 64 x overhead) / "
-                            "arithmetic, the most a batch can gain over the loop when both do the same arithmetic.")
+                            "arithmetic, the most a batch can gain over the loop when both do the same arithmetic. "
+                            "Page faults: minor faults per call over 20 calls (see the module docstring).")
 
 
 if __name__ == "__main__":
