@@ -172,12 +172,12 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
                                 count_prior=prior)
     found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
-    if not 1 <= len(curves) <= _PRIOR_COUNTS:
-        return curves, found
     if not _thin_enough(strokes):  # outside what the networks know: the classical reading alone
         if "p" in vote:  # the search ran with the vote: run it again without
             curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
             found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+        return curves, found
+    if not 1 <= len(curves) <= _PRIOR_COUNTS:
         return curves, found
     if "p" not in vote:
         # The pairing search did not run (a drawing over 256 px across: it would cost
