@@ -23,12 +23,15 @@ Method:
 - Table 1: on the first ``--refine`` images per mode, the Chamfer to the true curves of
   the network alone, of the network's curves refined by Chamfer against the ink pixels
   (``nurbskit.curves.classic.refine``, 20 L-BFGS iterations; the network read as table 2
-  reads it: one start, the paper's protocol), of the network's reading in each of the four
-  views refined the same way and the one closest to the ink kept (``refined_curves``,
-  what ``--method network --refine`` does), of a random start refined
-  the same way (the true number of curves, each with n = 4, 5 and 6 control points
-  uniform in the image, the best of the three kept by Chamfer to the ink: the paper's
-  protocol), and of the classical path (``fit_image``) on the same images.
+  reads it: one start, the paper's protocol), of that refinement followed by the search
+  of each curve's control-point count (``nurbskit.curves.classic.refine_counts``: a count
+  stepped by one while the Chamfer to the ink falls), of the network's reading in each
+  of the four views refined the same way, the one closest to the ink kept and its counts
+  searched (``refined_curves``, what ``--method network --refine`` does), of a random
+  start refined the same way (the true number of curves, each with n = 4, 5 and 6
+  control points uniform in the image, the best of the three kept by Chamfer to the ink:
+  the paper's protocol), of that random start with its counts searched as well, and of
+  the classical path (``fit_image``) on the same images.
 - Speed: median milliseconds of ``network_curves`` (one 128 x 128 image: resize, forward
   in the default views, curves in pixels) over 30 runs after warm-up, one torch thread,
   wall-clock and CPU
@@ -58,7 +61,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import RESULTS, write_results  # noqa: E402
 from bench_curves import MNIST, figure, read_idx_images, upsample  # noqa: E402
 
-from nurbskit.curves.classic import chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine  # noqa: E402
+from nurbskit.curves.classic import (  # noqa: E402
+    chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine, refine_counts)
+from nurbskit.curves.nets.models import MAX_POINTS, MIN_POINTS  # noqa: E402
 from nurbskit.curves.nets.predict import (  # noqa: E402
     DEFAULT_VIEWS, load_model, network_curves, predict_unit, read_views, refined_curves, to_curves)
 from nurbskit.curves.nets.train import LOSSES, _mse, network_inputs  # noqa: E402
@@ -133,6 +138,7 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
         t = time.perf_counter()
         refined = refine(net, ink, REFINE_ITERS) if net else net
         t_ref = time.perf_counter() - t
+        counted = refine_counts(refined, ink, REFINE_ITERS, MIN_POINTS, MAX_POINTS)
         t = time.perf_counter()
         views = refined_curves(s.image, ink, mode, False, REFINE_ITERS)
         t_views = time.perf_counter() - t
@@ -144,18 +150,24 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
             score = chamfer_to_ink(r, ink)["symmetric"]
             if score < best_score:
                 best, best_score = r, score
+        best_counted = refine_counts(best, ink, REFINE_ITERS, MIN_POINTS, MAX_POINTS)
         classic, _ = fit_image(s.image)
         rows.append({"network": _chamfer(net, truth), "network_refined": _chamfer(refined, truth),
+                     "network_counts_refined": _chamfer(counted, truth),
                      "network_views_refined": _chamfer(views, truth),
-                     "random_refined": _chamfer(best, truth), "classic": _chamfer(classic, truth),
+                     "random_refined": _chamfer(best, truth), "random_counts_refined": _chamfer(best_counted, truth),
+                     "classic": _chamfer(classic, truth),
                      "refine_seconds": t_ref, "views_refine_seconds": t_views})
     out = {"mode": mode, "images": len(rows)}
-    for key in ("network", "network_refined", "network_views_refined", "random_refined", "classic"):
+    for key in ("network", "network_refined", "network_counts_refined", "network_views_refined", "random_refined",
+                "random_counts_refined", "classic"):
         vals = [r[key] for r in rows]
         out[f"{key}_mean"] = statistics.fmean(vals)
         out[f"{key}_median"] = statistics.median(vals)
     out["ratio_net_refined_to_random"] = out["network_refined_mean"] / out["random_refined_mean"]
+    out["ratio_counts_refined_to_random"] = out["network_counts_refined_mean"] / out["random_refined_mean"]
     out["ratio_views_refined_to_random"] = out["network_views_refined_mean"] / out["random_refined_mean"]
+    out["ratio_views_to_random_counts"] = out["network_views_refined_mean"] / out["random_counts_refined_mean"]
     out["refine_seconds_median"] = statistics.median(r["refine_seconds"] for r in rows)
     out["views_refine_seconds_median"] = statistics.median(r["views_refine_seconds"] for r in rows)
     return out
@@ -263,10 +275,14 @@ def main() -> None:
                ("paper_point_acc", "paper"), ("curve_acc", "curve acc"), ("paper_curve_acc", "paper"),
                ("chamfer_px", "Chamfer px"), ("inference_ms", "ms/image"), ("inference_cpu_ms", "CPU ms/image"),
                ("network_mean", "net"), ("network_refined_mean", "net+refine"),
-               ("network_views_refined_mean", "net (4 views)+refine"),
-               ("random_refined_mean", "random+refine"), ("classic_mean", "classic"),
+               ("network_counts_refined_mean", "net+refine, counts searched"),
+               ("network_views_refined_mean", "net (4 views)+refine, counts searched"),
+               ("random_refined_mean", "random+refine"),
+               ("random_counts_refined_mean", "random+refine, counts searched"), ("classic_mean", "classic"),
                ("ratio_net_refined_to_random", "net+refine / random"),
-               ("ratio_views_refined_to_random", "net (4 views)+refine / random"),
+               ("ratio_counts_refined_to_random", "net+refine, counts searched / random"),
+               ("ratio_views_refined_to_random", "net (4 views)+refine, counts searched / random"),
+               ("ratio_views_to_random_counts", "the same / random, counts searched"),
                ("digits", "digits"), ("curves_to_ink_mean", "curves->ink"), ("ink_to_curves_mean", "ink->curves")]
     write_results("curves_nets", rows, columns, meta={"count": args.count, "refine": args.refine,
                                                       "mnist": args.mnist, "held_out_seed": HELD_OUT_SEED,

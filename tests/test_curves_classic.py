@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbskit.curves.classic import _fill_slivers, chamfer_points, fit_image
+from nurbskit.curves.classic import (_fill_slivers, chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine,
+                                    refine_counts, resampled)
 from nurbskit.curves.synthetic import curve_of, dense_samples, render
 
 from _assert import assert_close
@@ -247,3 +248,30 @@ def test_control_points_needed_reads_a_cubic_count():
     # A corner needs many more than either of its sides: uniform knots pay for it everywhere.
     corner = np.concatenate([line, line[-1] + np.stack([np.zeros(50), np.linspace(0, 100, 50)], axis=1)[1:]])
     assert _control_points_needed(corner, 1.0)[0] > 12
+
+
+def test_resampling_keeps_a_curve_its_spline_space_holds():
+    # A cubic Bezier (4 control points) lies in every clamped cubic spline space, so the
+    # least squares with 6 control points reproduces it; and a curve resampled to its own
+    # count is itself.
+    bezier = curve_of(np.array([[10.0, 20.0], [40.0, 100.0], [90.0, 5.0], [120.0, 60.0]]))
+    six = curve_of(np.array([[5.0, 5.0], [30.0, 90.0], [60.0, 20.0], [80.0, 110.0], [100.0, 40.0], [125.0, 70.0]]))
+    u = np.linspace(0.0, 1.0, 101)
+    assert_close(resampled(bezier, 6).evaluate(u).numpy(), bezier.evaluate(u).numpy(), atol=1e-9)
+    assert resampled(bezier, 6).control_points.shape == (6, 2)
+    assert_close(resampled(six, 6).control_points.numpy(), six.control_points.numpy(), atol=1e-9)
+
+
+def test_the_count_search_finds_a_curve_a_wrong_count_cannot_follow():
+    # A drawn 6-point curve started from a 4-point reading: refinement alone keeps 4
+    # points and stays off the stroke; the count search reaches the stroke.
+    truth = np.array([[8.0, 100.0], [30.0, 10.0], [55.0, 120.0], [75.0, 15.0], [100.0, 118.0], [122.0, 30.0]])
+    image = _polyline_image([_curve(truth)])
+    ink, _ = ink_mask(image)
+    start = refine([resampled(curve_of(truth), 4)], ink, 20)
+    found = refine_counts(start, ink, 20)
+    assert found[0].control_points.shape[0] >= 6
+    to_ink = [chamfer_to_ink(c, ink)["symmetric"] for c in (start, found)]
+    assert to_ink[1] < to_ink[0]
+    assert _symmetric(start, [_curve(truth)]) > 1.5
+    assert _symmetric(found, [_curve(truth)]) < 0.5

@@ -307,8 +307,9 @@ def test_each_view_of_a_perfect_reading_maps_back_to_the_truth(mode):
 def test_refined_curves_keep_the_view_closest_to_the_ink():
     """The network-initialised refinement (``--method network --refine``) refines each view's
     reading and keeps the one whose Chamfer to the ink is smallest: the naive loop over the
-    four readings gives the same curves; the first view is the drawing's own reading."""
-    from nurbskit.curves.classic import chamfer_to_ink, ink_mask, refine
+    four readings gives the same curves; the first view is the drawing's own reading. Then
+    each curve's count is searched from the kept reading (``refine_counts``)."""
+    from nurbskit.curves.classic import chamfer_to_ink, ink_mask, refine, refine_counts
     from nurbskit.curves.nets.predict import each_view, load_model, network_curves, network_ink, refined_curves
     from nurbskit.curves.nets.predict import to_curves
 
@@ -322,12 +323,17 @@ def test_refined_curves_keep_the_view_closest_to_the_ink():
         assert_close(a.control_points, b.control_points, atol=1e-3, rtol=0)
     refined = [refine(to_curves(r[0], 128, 128), ink, 5) for r in readings]
     scores = [chamfer_to_ink(c, ink)["symmetric"] for c in refined]
-    got = refined_curves(sample.image, ink, "MV", False, 5)
+    kept = refined_curves(sample.image, ink, "MV", False, 5, counts=False)
     best = refined[int(np.argmin(scores))]
-    assert len(got) == len(best)
-    for a, b in zip(got, best):
+    assert len(kept) == len(best)
+    for a, b in zip(kept, best):
         assert torch.equal(a.control_points, b.control_points)
-    assert chamfer_to_ink(got, ink)["symmetric"] <= scores[0]
+    got = refined_curves(sample.image, ink, "MV", False, 5)
+    searched = refine_counts(best, ink, 5, 4, 8)
+    assert [c.control_points.shape for c in got] == [c.control_points.shape for c in searched]
+    for a, b in zip(got, searched):
+        assert torch.equal(a.control_points, b.control_points)
+    assert chamfer_to_ink(got, ink)["symmetric"] <= min(scores) <= scores[0]
 
 
 def test_views_are_one_or_four():

@@ -156,6 +156,8 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     shipped ``curves_mv_redrawn`` weights, the classical path alone."""
     from .classic import _PRIOR_COUNTS, fit_image
     from .classic import refine as refine_curves
+    from .classic import refine_counts
+    from .nets.models import MAX_POINTS, MIN_POINTS
     from .nets.predict import count_probabilities, curves_of_count, load_model, redrawn
 
     try:
@@ -199,7 +201,8 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     k = int(np.argmax(log_p[:3])) + 1  # the networks were trained on 1 to 3 curves
     if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_SWITCH:
         return curves, found
-    net = refine_curves(curves_of_count(redrawn(vote["skeleton"]), k, grey.shape), strokes.ink, refine_iterations)
+    start = refine_curves(curves_of_count(redrawn(vote["skeleton"]), k, grey.shape), strokes.ink, refine_iterations)
+    net = refine_counts(start, strokes.ink, refine_iterations, MIN_POINTS, MAX_POINTS)
     found.chosen = "network"
     return net, found
 

@@ -221,7 +221,7 @@ def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -
 
 
 def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted: bool = False,
-                   iterations: int = 20) -> list:
+                   iterations: int = 20, counts: bool = True) -> list:
     """The paper's network-initialised optimisation: the shipped ``mode`` network's
     readings of ``grey (H, W)`` in each of the four :data:`VIEWS` (:func:`each_view`),
     each refined by Chamfer against the ink pixels (``ink (H, W)`` bool;
@@ -236,7 +236,7 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
     0.53 to 0.39 px (V) against refining the reading :func:`network_curves` gives
     (``benchmarks/results/curves_nets.md``, table 1).
     """
-    from ..classic import chamfer_to_ink, refine
+    from ..classic import chamfer_to_ink, refine, refine_counts
 
     model, meta = load_model(mode)
     h, w = grey.shape
@@ -247,7 +247,9 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
         score = chamfer_to_ink(curves, ink)["symmetric"] if curves else float("inf")
         if score < best_score:
             best, best_score = curves, score
-    return best
+    if not counts:
+        return best
+    return refine_counts(best, ink, iterations, MIN_POINTS, MAX_POINTS)
 
 
 # The training drawings' size and stroke width (synthetic.mode_config at 128 px).
