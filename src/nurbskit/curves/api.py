@@ -67,7 +67,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       ``-2 log P(count)`` added to the description length (:func:`nurbskit.curves.classic.trace_strokes`,
       ``count_prior``); where the classical count stays less likely than the vote's
       (1-3 curves) by more than ``HYBRID_SWITCH`` nats, the MV network's curves for the
-      vote's count, refined by Chamfer against the ink, are returned instead. On drawings
+      vote's count, refined by Chamfer against the ink (their control-point counts
+      searched, :func:`nurbskit.curves.classic.refine_counts`), are returned instead. On drawings
       over 256 px across, where the search does not run by default, the vote is read
       first and the search run with it only where it is surer of another count by more
       than ``HYBRID_LARGE`` nats (the network's curves are not used there). Drawings the classical path reads as more
@@ -80,7 +81,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       with ``refine`` its readings start the classical Chamfer refinement
       (:func:`nurbskit.curves.classic.refine`), the paper's "network-initialised
       optimisation": one reading per view of the drawing (four), each refined, the one
-      closest to the ink kept (:func:`nurbskit.curves.nets.predict.refined_curves`).
+      closest to the ink kept, then each curve's number of control points searched
+      against the ink (:func:`nurbskit.curves.nets.predict.refined_curves`).
     * ``"auto"``: both candidates, the classical curves (refined when ``refine``) and the
       MV network's curves refined by Chamfer as ``"network"`` refines them (always:
       unrefined network curves are rarely better), and keeps the one with the smaller

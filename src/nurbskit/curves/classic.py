@@ -1216,10 +1216,10 @@ def refine_counts(curves: list, ink: np.ndarray, iterations: int = 20, fewest: i
 
     Why: refinement moves control points but cannot change how many there are, and a start
     with the wrong count (a network reads the count of a curve's control points right
-    about half the time) ends a pixel from the ink where the right count ends a third of
-    one: on 40 development drawings of two and three curves, the refined MV readings whose
-    counts were all right lay 0.35 px from the true curves, the others 1.1 px
-    (``docs/curves.md``, "Refinement").
+    about half the time) ends a pixel from the truth where the right count ends a third
+    of one: on 40 development drawings of one to three curves, the refined MV readings
+    whose counts were all right lay 0.35 px from the true curves, the others 1.1 px
+    (``docs/curves.md``, "The count search").
     """
     best = list(curves)
     if not best:

@@ -225,8 +225,10 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
     """The paper's network-initialised optimisation: the shipped ``mode`` network's
     readings of ``grey (H, W)`` in each of the four :data:`VIEWS` (:func:`each_view`),
     each refined by Chamfer against the ink pixels (``ink (H, W)`` bool;
-    :func:`nurbskit.curves.classic.refine`, ``iterations`` L-BFGS iterations), and the
-    one whose symmetric Chamfer to the ink is smallest kept (the first on a tie).
+    :func:`nurbskit.curves.classic.refine`, ``iterations`` L-BFGS iterations), the one
+    whose symmetric Chamfer to the ink is smallest kept (the first on a tie), and, with
+    ``counts``, each of its curves' number of control points searched against the ink
+    (:func:`nurbskit.curves.classic.refine_counts`, within the networks' 4 to 8).
 
     Why four starts: refinement keeps the basin its start lies in, and where strokes
     cross, a reading a few pixels off locks onto the wrong stroke. The four readings
