@@ -133,18 +133,24 @@ def test_without_the_shipped_weights_the_default_is_the_classical_path(monkeypat
     assert found.chosen == "classic" and len(curves) == len(classic) == 1
 
 
-def test_strokes_thicker_than_the_networks_know_get_the_classical_reading():
+def test_strokes_thicker_than_the_networks_know_get_the_classical_reading(monkeypatch):
     # Strokes 14 px wide in a 128 px drawing (the networks trained on 1 to 3 px): over
     # HYBRID_MAX_WIDTH of the ink's extent, so the hybrid returns the classical path's
-    # curves, vote unused. On these two drawings the vote would change the count (checked
-    # with the guard lifted), so the test fails if the guard goes.
+    # curves, and the vote is not even read (the width is known before it). On these two
+    # drawings the vote would change the count (checked with the guard lifted), so the
+    # test fails if the guard goes.
     from nurbskit.curves import api
+    from nurbskit.curves.nets import predict
 
+    votes = []
+    read = predict.count_probabilities
+    monkeypatch.setattr(predict, "count_probabilities", lambda *a, **k: votes.append(1) or read(*a, **k))
     for i in (2, 25):
         sample = make_sample(400_000 + i, SyntheticConfig(curves=(1, 1), width=14.0))
         classic, _ = extract(sample.image, method="classic")
         hybrid, found = extract(sample.image, method="hybrid")
-        assert not api._thin_enough(found.strokes)
+        assert not api._thin_enough(found.strokes.width, found.strokes.ink)
+        assert not votes
         assert found.chosen == "classic" and len(hybrid) == len(classic)
         for a, b in zip(hybrid, classic):
             np.testing.assert_allclose(a.control_points.numpy(), b.control_points.numpy(), rtol=0, atol=0)

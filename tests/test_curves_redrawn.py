@@ -50,7 +50,7 @@ def test_redrawn_training_drawings_are_what_the_hybrid_method_reads():
     for b in range(6):
         seen = {}
 
-        def prior(skeleton):
+        def prior(skeleton, width, ink):
             seen["skeleton"] = skeleton
             return np.full(5, 0.2)
 

@@ -143,14 +143,14 @@ HYBRID_LARGE = 3.0
 HYBRID_MAX_WIDTH = 0.08
 
 
-def _thin_enough(strokes) -> bool:
-    """Whether the classical path's strokes are as thin, relative to the drawing, as the
-    networks' training drawings (see ``HYBRID_MAX_WIDTH``)."""
-    rows, cols = np.nonzero(strokes.ink)
+def _thin_enough(width: float, ink: np.ndarray) -> bool:
+    """Whether strokes ``width`` px wide in ``ink (H, W)`` bool are as thin, relative to the
+    ink's extent, as the networks' training drawings (see ``HYBRID_MAX_WIDTH``)."""
+    rows, cols = np.nonzero(ink)
     if not len(rows):
         return False
     extent = max(int(rows.max() - rows.min()), int(cols.max() - cols.min())) + 1
-    return strokes.width <= HYBRID_MAX_WIDTH * extent
+    return width <= HYBRID_MAX_WIDTH * extent
 
 
 def _hybrid(grey, tolerance, iterations, refine_iterations, source):
@@ -169,14 +169,22 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     vote = {}
 
-    def prior(skeleton):
+    def read_vote(skeleton):
         vote["skeleton"], vote["p"] = skeleton, count_probabilities(skeleton, "MV")
         return vote["p"]
+
+    def prior(skeleton, width, ink):
+        if not _thin_enough(width, ink):
+            vote["thick"] = True  # no vote: the search runs as the classical path's
+            return None
+        return read_vote(skeleton)
 
     curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
                                 count_prior=prior)
     found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
-    if not _thin_enough(strokes):  # outside what the networks know: the classical reading alone
+    if vote.get("thick") or not _thin_enough(strokes.width, strokes.ink):
+        # Outside what the networks know: the classical reading alone. The width is known
+        # before the vote where the search runs, and then the vote is not read at all.
         if "p" in vote:  # the search ran with the vote: run it again without
             curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
             found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
@@ -192,12 +200,12 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
 
         from .classic import _fill_slivers
 
-        log_p = np.log(np.maximum(prior(skeletonize(_fill_slivers(strokes.ink))), 1e-9))
+        log_p = np.log(np.maximum(read_vote(skeletonize(_fill_slivers(strokes.ink))), 1e-9))
         k = int(np.argmax(log_p[:3])) + 1
         if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_LARGE:
             return curves, found
         curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
-                                    count_prior=lambda skeleton: vote["p"], search_extent=float("inf"))
+                                    count_prior=lambda skeleton, width, ink: vote["p"], search_extent=float("inf"))
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     log_p = np.log(np.maximum(vote["p"], 1e-9))
     k = int(np.argmax(log_p[:3])) + 1  # the networks were trained on 1 to 3 curves

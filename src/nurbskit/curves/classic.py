@@ -521,11 +521,13 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     ``tolerance`` (pixels, the fit's) drives the choice of pairings at junctions
     (:func:`_fewest_curves`); None keeps the good-continuation pairing alone.
     ``count_prior``, when given, is called with the skeleton ``(H, W)`` bool (the ink's
-    frame) and returns the probabilities of 1, 2, ... curves (a network's count vote,
-    :func:`nurbskit.curves.nets.predict.count_probabilities`): evidence added to the
-    description length of each candidate grouping (see :func:`_fewest_curves`). It is
-    called only when the search runs: on drawings whose ink spans at most
-    ``search_extent`` pixels (bounding-box diagonal; default ``_SEARCH_EXTENT``).
+    frame), the stroke width (pixels) and ``ink`` itself, and returns the probabilities of
+    1, 2, ... curves
+    (a network's count vote, :func:`nurbskit.curves.nets.predict.count_probabilities`):
+    evidence added to the description length of each candidate grouping (see
+    :func:`_fewest_curves`), or None for no evidence. It is called only when the search
+    runs: on drawings whose ink spans at most ``search_extent`` pixels (bounding-box
+    diagonal; default ``_SEARCH_EXTENT``).
     """
     from scipy import ndimage
     from skimage.morphology import skeletonize
@@ -535,7 +537,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     # Work on the ink's bounding box (with a margin): drawings are mostly background.
     rows, cols = np.nonzero(ink)
     r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
-    frame = ink.shape
+    frame, full_ink = ink.shape, ink
     ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
     skel = skeletonize(_fill_slivers(ink))
     dt = ndimage.distance_transform_edt(ink)
@@ -612,7 +614,8 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
         if count_prior is not None:
             full = np.zeros(frame, bool)
             full[r0:r0 + skel.shape[0], c0:c0 + skel.shape[1]] = skel
-            prior = np.asarray(count_prior(full), dtype=np.float64)
+            prior = count_prior(full, width, full_ink)
+            prior = None if prior is None else np.asarray(prior, dtype=np.float64)
         partner, tips = _fewest_curves(edges, partner, tips, done, trim, origin, width, tolerance, extent, prior)
     out = [pts for pts, _ in _chains(edges, partner, tips, trim, origin)]
     out = _join_broken(out, width)
@@ -1272,9 +1275,9 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         refine_iterations: L-BFGS iterations of Chamfer refinement (0: none).
         min_length: strokes shorter than this (pixels) are dropped as noise (default:
             2 stroke widths + 4 px, the width taken at most 4 px).
-        count_prior: None, or a callable: skeleton ``(H, W)`` bool -> probabilities of
-            1, 2, ... curves, used as evidence when choosing junction pairings (see
-            :func:`trace_strokes`).
+        count_prior: None, or a callable: (skeleton ``(H, W)`` bool, stroke width, ink
+            ``(H, W)`` bool) -> probabilities of 1, 2, ... curves (or None), used as
+            evidence when choosing junction pairings (see :func:`trace_strokes`).
         search_extent: the pairing search runs on drawings whose ink spans at most this
             many pixels (default: 256, see :func:`trace_strokes`).
     """
