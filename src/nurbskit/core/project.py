@@ -141,9 +141,11 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
     Where the free block of ``H`` is not safely positive definite (eigenvalues below
     ``1e-10`` of the trace of ``J J^T``), the Levenberg-Marquardt matrix
     ``J J^T + (1e-3 trace) I`` takes its place: positive definite whenever ``J`` has rank,
-    so the step descends. Branch-free (no host read): both the direction with the first
-    active set and the one with the blocked parameters held as well are computed, and
-    ``torch.where`` picks. The 2 x 2 systems are solved in closed form on their entries.
+    so the step descends. Branch-free (no host read): the direction with the first active
+    set and the one with the blocked parameters held as well are both computed, and
+    ``torch.where`` picks. The 2 x 2 systems are solved in closed form on their entries;
+    the second direction, where at most one parameter is left free, is the 1-D step on
+    each diagonal entry (about a third fewer operations than a second 2 x 2 solve).
     """
     JJ = J @ J.transpose(1, 2)
     trace = JJ.diagonal(dim1=1, dim2=2).sum(-1)
@@ -152,22 +154,23 @@ def _step(g: Tensor, H: Tensor, J: Tensor, t: Tensor, lo: Tensor, hi: Tensor) ->
     fill = trace + 1.0  # any positive diagonal for a fixed coordinate: its step is 0
     at_lo, at_hi = t <= lo, t >= hi
     free = ~((at_lo & (g > 0)) | (at_hi & (g < 0)))
-
-    def direction(free):
-        h = _reduced(H, free, fill)
-        lm = _reduced(JJ, free, fill)
-        lm[0] = lm[0] + damping
-        if len(lm) > 1:
-            lm[2] = lm[2] + damping
-        pd = _positive_definite(h, eps)
-        m = [torch.where(pd, x, y) for x, y in zip(h, lm)]
-        return _solve(m, torch.where(free, g, 0.0))
-
-    d = direction(free)
+    h = _reduced(H, free, fill)
+    lm = _reduced(JJ, free, fill)
+    lm[0] = lm[0] + damping
+    if len(lm) > 1:
+        lm[2] = lm[2] + damping
+    pd = _positive_definite(h, eps)
+    d = _solve([torch.where(pd, x, y) for x, y in zip(h, lm)], torch.where(free, g, 0.0))
     # A Newton step that points out of the domain from an edge is blocked by the clamp and
-    # may then not descend: hold that parameter as well and solve for the other one alone.
+    # may then not descend: hold that parameter as well and step along the other alone.
+    # Blocked parameters are free ones, so at most one of k <= 2 is left: its 1-D Newton
+    # step on the diagonal entry of H (of the Levenberg-Marquardt matrix where that entry
+    # is not safely positive), and 0 where none is left.
     blocked = free & ((at_lo & (d < 0)) | (at_hi & (d > 0)))
-    return torch.where(blocked.any(-1, keepdim=True), direction(free & ~blocked), d)
+    diag = H.diagonal(dim1=1, dim2=2)
+    alone = torch.where(diag > eps.unsqueeze(-1), diag, JJ.diagonal(dim1=1, dim2=2) + damping.unsqueeze(-1))
+    held = torch.where(free & ~blocked, -g / alone, 0.0)
+    return torch.where(blocked.any(-1, keepdim=True), held, d)
 
 
 class _Domain(NamedTuple):
