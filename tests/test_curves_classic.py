@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbskit.curves.classic import (_fill_slivers, chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine,
-                                    refine_counts, resampled)
+                                    refine_counts, resampled, stroke_width)
 from nurbskit.curves.synthetic import curve_of, dense_samples, render
 
 from _assert import assert_close
@@ -275,3 +275,13 @@ def test_the_count_search_finds_a_curve_a_wrong_count_cannot_follow():
     assert to_ink[1] < to_ink[0]
     assert _symmetric(start, [_curve(truth)]) > 1.5
     assert _symmetric(found, [_curve(truth)]) < 0.5
+
+
+def test_stroke_width_is_the_width_the_strokes_are_traced_with():
+    a = _curve([[10, 20], [50, 50], [80, 80], [118, 110]])
+    for width in (1.0, 3.0, 8.0):
+        image = _polyline_image([a], width=width)
+        _, strokes = fit_image(image)
+        assert stroke_width(strokes.ink) == strokes.width
+        assert abs(stroke_width(strokes.ink) - width) <= 1.5
+    assert stroke_width(np.zeros((5, 5), bool)) == 1.0

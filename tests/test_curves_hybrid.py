@@ -149,7 +149,7 @@ def test_strokes_thicker_than_the_networks_know_get_the_classical_reading(monkey
         sample = make_sample(400_000 + i, SyntheticConfig(curves=(1, 1), width=14.0))
         classic, _ = extract(sample.image, method="classic")
         hybrid, found = extract(sample.image, method="hybrid")
-        assert not api._thin_enough(found.strokes.width, found.strokes.ink)
+        assert not api.thin_enough(found.strokes.width, found.strokes.ink)
         assert not votes
         assert found.chosen == "classic" and len(hybrid) == len(classic)
         for a, b in zip(hybrid, classic):

@@ -336,6 +336,27 @@ def test_refined_curves_keep_the_view_closest_to_the_ink():
     assert chamfer_to_ink(got, ink)["symmetric"] <= min(scores) <= scores[0]
 
 
+def test_the_count_search_is_left_out_on_strokes_thicker_than_the_networks_know():
+    # On strokes 14 px wide in a 128 px drawing the Chamfer to the ink pixels rewards
+    # curves that fill the stroke; refined_curves then keeps the counts it read (its
+    # default), and searches them when told to.
+    from nurbskit.curves.api import thin_enough
+    from nurbskit.curves.classic import ink_mask, stroke_width
+    from nurbskit.curves.nets.predict import refined_curves
+    from nurbskit.curves.synthetic import SyntheticConfig, make_sample
+
+    sample = make_sample(400_002, SyntheticConfig(curves=(1, 1), width=14.0))
+    ink, _ = ink_mask(sample.image)
+    assert not thin_enough(stroke_width(ink), ink)
+    default = refined_curves(sample.image, ink, "MV", False, 5)
+    kept = refined_curves(sample.image, ink, "MV", False, 5, counts=False)
+    searched = refined_curves(sample.image, ink, "MV", False, 5, counts=True)
+    assert [c.control_points.shape for c in default] == [c.control_points.shape for c in kept]
+    for a, b in zip(default, kept):
+        assert torch.equal(a.control_points, b.control_points)
+    assert [c.control_points.shape for c in searched] != [c.control_points.shape for c in kept]
+
+
 def test_views_are_one_or_four():
     from nurbskit.curves.nets.predict import load_model, read_views
 

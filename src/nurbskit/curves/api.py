@@ -143,7 +143,7 @@ HYBRID_LARGE = 3.0
 HYBRID_MAX_WIDTH = 0.08
 
 
-def _thin_enough(width: float, ink: np.ndarray) -> bool:
+def thin_enough(width: float, ink: np.ndarray) -> bool:
     """Whether strokes ``width`` px wide in ``ink (H, W)`` bool are as thin, relative to the
     ink's extent, as the networks' training drawings (see ``HYBRID_MAX_WIDTH``)."""
     rows, cols = np.nonzero(ink)
@@ -174,7 +174,7 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
         return vote["p"]
 
     def prior(skeleton, width, ink):
-        if not _thin_enough(width, ink):
+        if not thin_enough(width, ink):
             vote["thick"] = True  # no vote: the search runs as the classical path's
             return None
         return read_vote(skeleton)
@@ -182,7 +182,7 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
                                 count_prior=prior)
     found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
-    if vote.get("thick") or not _thin_enough(strokes.width, strokes.ink):
+    if vote.get("thick") or not thin_enough(strokes.width, strokes.ink):
         # Outside what the networks know: the classical reading alone. The width is known
         # before the vote where the search runs, and then the vote is not read at all.
         if "p" in vote:  # the search ran with the vote: run it again without

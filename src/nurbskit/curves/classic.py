@@ -511,6 +511,30 @@ def _min_length(width: float) -> float:
     return 2.0 * min(width, _THICK) + 4.0
 
 
+def _cropped(ink: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The ink's bounding box with a 2 px margin (drawings are mostly background), and its
+    top-left corner ``(row, col)`` in the image."""
+    rows, cols = np.nonzero(ink)
+    r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
+    return ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3], r0, c0
+
+
+def _width(skel: np.ndarray, dt: np.ndarray) -> float:
+    return float(2 * np.median(dt[skel])) if skel.any() else 1.0
+
+
+def stroke_width(ink: np.ndarray) -> float:
+    """The strokes' width in pixels, as :func:`trace_strokes` estimates it: twice the median
+    distance from the skeleton's pixels to the background (1.0 without ink)."""
+    from scipy import ndimage
+    from skimage.morphology import skeletonize
+
+    if not ink.any():
+        return 1.0
+    ink, _, _ = _cropped(ink)
+    return _width(skeletonize(_fill_slivers(ink)), ndimage.distance_transform_edt(ink))
+
+
 def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = True,
                   tolerance: float | None = 1.0, count_prior=None,
                   search_extent: float | None = None) -> tuple[list[np.ndarray], float]:
@@ -534,15 +558,12 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
 
     if not ink.any():
         return [], 1.0 if width is None else width
-    # Work on the ink's bounding box (with a margin): drawings are mostly background.
-    rows, cols = np.nonzero(ink)
-    r0, c0 = max(int(rows.min()) - 2, 0), max(int(cols.min()) - 2, 0)
     frame, full_ink = ink.shape, ink
-    ink = ink[r0:int(rows.max()) + 3, c0:int(cols.max()) + 3]
+    ink, r0, c0 = _cropped(ink)
     skel = skeletonize(_fill_slivers(ink))
     dt = ndimage.distance_transform_edt(ink)
     if width is None:
-        width = float(2 * np.median(dt[skel])) if skel.any() else 1.0
+        width = _width(skel, dt)
     nodes, edges = _graph(skel)
     short = max(2.0, 1.5 * width)
 

@@ -221,14 +221,18 @@ def network_curves(grey: np.ndarray, mode: str = "MV", inverted: bool = False) -
 
 
 def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted: bool = False,
-                   iterations: int = 20, counts: bool = True) -> list:
+                   iterations: int = 20, counts: bool | None = None) -> list:
     """The paper's network-initialised optimisation: the shipped ``mode`` network's
     readings of ``grey (H, W)`` in each of the four :data:`VIEWS` (:func:`each_view`),
     each refined by Chamfer against the ink pixels (``ink (H, W)`` bool;
     :func:`nurbskit.curves.classic.refine`, ``iterations`` L-BFGS iterations), the one
     whose symmetric Chamfer to the ink is smallest kept (the first on a tie), and, with
     ``counts``, each of its curves' number of control points searched against the ink
-    (:func:`nurbskit.curves.classic.refine_counts`, within the networks' 4 to 8).
+    (:func:`nurbskit.curves.classic.refine_counts`, within the networks' 4 to 8). By
+    default (``counts=None``) the search runs where the strokes are as thin as the
+    networks know (:func:`nurbskit.curves.api.thin_enough`): on thick strokes (upsampled
+    digits) the Chamfer to the ink pixels rewards curves that fill the stroke, and more
+    control points only let them scribble.
 
     Why four starts: refinement keeps the basin its start lies in, and where strokes
     cross, a reading a few pixels off locks onto the wrong stroke. The four readings
@@ -249,6 +253,11 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
         score = chamfer_to_ink(curves, ink)["symmetric"] if curves else float("inf")
         if score < best_score:
             best, best_score = curves, score
+    if counts is None:  # see the docstring: on thick strokes the search would fill them
+        from ..api import thin_enough
+        from ..classic import stroke_width
+
+        counts = thin_enough(stroke_width(ink), ink)
     if not counts:
         return best
     return refine_counts(best, ink, iterations, MIN_POINTS, MAX_POINTS)
