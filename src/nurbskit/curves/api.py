@@ -82,7 +82,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       (:func:`nurbskit.curves.classic.refine`), the paper's "network-initialised
       optimisation": one reading per view of the drawing (four), each refined, the one
       closest to the ink kept, then each curve's number of control points searched
-      against the ink (:func:`nurbskit.curves.nets.predict.refined_curves`).
+      against the ink where the strokes are as thin as the networks know
+      (:func:`thin_enough`; :func:`nurbskit.curves.nets.predict.refined_curves`).
     * ``"auto"``: both candidates, the classical curves (refined when ``refine``) and the
       MV network's curves refined by Chamfer as ``"network"`` refines them (always:
       unrefined network curves are rarely better), and keeps the one with the smaller
