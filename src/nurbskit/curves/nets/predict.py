@@ -240,7 +240,8 @@ def refined_curves(grey: np.ndarray, ink: np.ndarray, mode: str = "MV", inverted
     of them is often in the right basin: on 40 held-out drawings per mode the refined
     Chamfer to the true curves fell from 1.40 to 1.08 px (M), 1.25 to 0.98 px (MV) and
     0.53 to 0.39 px (V) against refining the reading :func:`network_curves` gives
-    (``benchmarks/results/curves_nets.md``, table 1).
+    (twelfth session, before the count search; with it, 0.68 / 0.59 / 0.31 px, table 1
+    of ``benchmarks/results/curves_nets.md``).
     """
     from ..classic import chamfer_to_ink, refine, refine_counts
 
