@@ -31,7 +31,10 @@ Method:
   start refined the same way (the true number of curves, each with n = 4, 5 and 6
   control points uniform in the image, the best of the three kept by Chamfer to the ink:
   the paper's protocol), of that random start with its counts searched as well, and of
-  the classical path (``fit_image``) on the same images.
+  the classical path (``fit_image``) on the same images. Beside them, the share of
+  drawings whose counts are all right (the number of curves and, sorted, each curve's
+  number of control points): the network's reading as table 2 reads it, and the
+  four views refined with the count search.
 - Speed: median milliseconds of ``network_curves`` (one 128 x 128 image: resize, forward
   in the default views, curves in pixels) over 30 runs after warm-up, one torch thread,
   wall-clock and CPU
@@ -130,6 +133,14 @@ def table2(mode: str, count: int, chunk: int = 100, views: int = 1):
     return row, images
 
 
+def _counts_right(curves, truth) -> bool:
+    """Whether ``curves`` have the true number of curves and, sorted, the true numbers of
+    control points (the drawing's counts, whichever curve carries them)."""
+    def counts(cs):
+        return sorted(int(c.control_points.shape[0]) for c in cs)
+    return len(curves) == len(truth) and counts(curves) == counts(truth)
+
+
 def table1(mode: str, images: list, count: int, rng: np.random.Generator):
     rows = []
     for s, net in images[:count]:
@@ -157,7 +168,9 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
                      "network_views_refined": _chamfer(views, truth),
                      "random_refined": _chamfer(best, truth), "random_counts_refined": _chamfer(best_counted, truth),
                      "classic": _chamfer(classic, truth),
-                     "refine_seconds": t_ref, "views_refine_seconds": t_views})
+                     "refine_seconds": t_ref, "views_refine_seconds": t_views,
+                     "counts_right_network": _counts_right(net, truth),
+                     "counts_right_views": _counts_right(views, truth)})
     out = {"mode": mode, "images": len(rows)}
     for key in ("network", "network_refined", "network_counts_refined", "network_views_refined", "random_refined",
                 "random_counts_refined", "classic"):
@@ -168,6 +181,8 @@ def table1(mode: str, images: list, count: int, rng: np.random.Generator):
     out["ratio_counts_refined_to_random"] = out["network_counts_refined_mean"] / out["random_refined_mean"]
     out["ratio_views_refined_to_random"] = out["network_views_refined_mean"] / out["random_refined_mean"]
     out["ratio_views_to_random_counts"] = out["network_views_refined_mean"] / out["random_counts_refined_mean"]
+    out["counts_right_network"] = statistics.fmean(r["counts_right_network"] for r in rows)
+    out["counts_right_views"] = statistics.fmean(r["counts_right_views"] for r in rows)
     out["refine_seconds_median"] = statistics.median(r["refine_seconds"] for r in rows)
     out["views_refine_seconds_median"] = statistics.median(r["views_refine_seconds"] for r in rows)
     return out
@@ -283,6 +298,8 @@ def main() -> None:
                ("ratio_counts_refined_to_random", "net+refine, counts searched / random"),
                ("ratio_views_refined_to_random", "net (4 views)+refine, counts searched / random"),
                ("ratio_views_to_random_counts", "the same / random, counts searched"),
+               ("counts_right_network", "all counts right: network"),
+               ("counts_right_views", "all counts right: net (4 views)+refine, counts searched"),
                ("digits", "digits"), ("curves_to_ink_mean", "curves->ink"), ("ink_to_curves_mean", "ink->curves")]
     write_results("curves_nets", rows, columns, meta={"count": args.count, "refine": args.refine,
                                                       "mnist": args.mnist, "held_out_seed": HELD_OUT_SEED,
