@@ -520,6 +520,7 @@ def _cropped(ink: np.ndarray) -> tuple[np.ndarray, int, int]:
 
 
 def _width(skel: np.ndarray, dt: np.ndarray) -> float:
+    """Twice the median distance transform ``dt`` on the skeleton ``skel`` (1.0 if empty)."""
     return float(2 * np.median(dt[skel])) if skel.any() else 1.0
 
 
@@ -546,12 +547,11 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
     (:func:`_fewest_curves`); None keeps the good-continuation pairing alone.
     ``count_prior``, when given, is called with the skeleton ``(H, W)`` bool (the ink's
     frame), the stroke width (pixels) and ``ink`` itself, and returns the probabilities of
-    1, 2, ... curves
-    (a network's count vote, :func:`nurbskit.curves.nets.predict.count_probabilities`):
-    evidence added to the description length of each candidate grouping (see
-    :func:`_fewest_curves`), or None for no evidence. It is called only when the search
-    runs: on drawings whose ink spans at most ``search_extent`` pixels (bounding-box
-    diagonal; default ``_SEARCH_EXTENT``).
+    1, 2, ... curves (a network's count vote,
+    :func:`nurbskit.curves.nets.predict.count_probabilities`): evidence added to the
+    description length of each candidate grouping (see :func:`_fewest_curves`), or None
+    for no evidence. It is called only when the search runs: on drawings whose ink spans
+    at most ``search_extent`` pixels (bounding-box diagonal; default ``_SEARCH_EXTENT``).
     """
     from scipy import ndimage
     from skimage.morphology import skeletonize
