@@ -15,7 +15,7 @@ Method:
   images per count) at 512 x 512. Per image: the symmetric Chamfer to the true curves
   (mean nearest distance between dense samples, 0.25 px apart, of the fitted and of the
   true curves, each way, and their mean), whether the number of curves is right, which
-  curves were kept (``chosen``: the classical ones or the network's), wall
+  curves were kept (``chosen``: the classical ones, regrouped, or the network's), wall
   seconds and CPU seconds (``time.process_time``, which load on the shared machine
   inflates far less than the wall clock), after a warm-up. At 512 x 512 the CPU seconds
   are split into ink (grey + Otsu), tracing (skeleton, graph, junctions, without the
@@ -49,8 +49,8 @@ The issue's goals for the default method: <= 1 px for one curve and <= 1.5 px fo
 three, >= 90 % right counts, <= 2 px at 512 x 512, <= 2.5 px on MNIST to the ink; <= 300
 ms for a 512 x 512 drawing. The issue's test set is 2,000 images per mode; the default
 method is run on ``--count`` (default 300) per row here, the shared 2-core machine being
-heavily loaded. The counts before (``BEFORE``) are the default method's at commit 8ce2358
-(the count vote by the MV weights trained on the drawings themselves), on the same seeds.
+heavily loaded. The counts before (``BEFORE``) are the default method's at commit 3e76e98
+(before the network's curves regrouped the classical ones), on the same seeds.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_curves.py [--count 300] [--large 300] [--refined 100] [--mnist 300]``.
 """
@@ -105,9 +105,9 @@ def upsample(image: np.ndarray, factor: int) -> np.ndarray:
 # with the vote of the MV weights trained on the drawings themselves. (The classical path
 # alone, the default until b40661d: 96.7 / 81.7 / 66.0 %, pooled 81.4 % at 128 px; 97.0 /
 # 87.3 / 66.3 %, pooled 83.6 % at 512 px.)
-BEFORE_COMMIT = "8ce2358, hybrid, image MV vote"
-BEFORE = {(128, 1): 95.0, (128, 2): 85.3, (128, 3): 82.7, (128, "1-3"): 87.7,
-          (512, 1): 96.7, (512, 2): 89.0, (512, 3): 81.3, (512, "1-3"): 89.0}
+BEFORE_COMMIT = "3e76e98, hybrid, before regrouping"
+BEFORE = {(128, 1): 96.7, (128, 2): 86.0, (128, 3): 90.0, (128, "1-3"): 90.9,
+          (512, 1): 97.7, (512, 2): 88.3, (512, 3): 83.0, (512, "1-3"): 89.7}
 
 # Failure classes, read off the true curves (not the drawing): how a count can go wrong.
 CLASSES = ("self-crossing", "end on another curve", "sharp turn", "plain")
@@ -346,16 +346,19 @@ def report(summary: list[dict], args, skipped: dict[str, str], per_image: list[d
                 if "ambiguous" in rs[0] else ("", "")
             rows.append([f"{size} x {size}, {n} curve(s)" + (" (pooled)" if n == "1-3" else ""), len(rs),
                          f"{100 * right:.1f} %", "" if before is None else f"{before:.1f} %", *unamb,
+                         sum(r.get("chosen") == "regrouped" for r in rs),
                          sum(r.get("chosen") == "network" for r in rs),
                          ">= 90 %", "met" if right >= 0.9 else "missed"])
     lines += _table(["drawings", "images", "curve count right", f"before ({BEFORE_COMMIT})", "ambiguous images",
-                     "right among the others", "network's curves kept", "goal", ""], rows)
+                     "right among the others", "classical curves regrouped", "network's curves kept", "goal", ""], rows)
     lines += ["Ambiguous (read off the true curves, 128 px only): two true curves meet end to end and one "
               "continues the other smoothly (ends within width + 1 px, outward tangents opposite within 30 "
               "degrees), so the drawing is that of one curve. The goal is judged on all images. "
-              "Network's curves kept: images where the default method returned the MV network's curves "
-              "(refined against the ink) because its count vote disagreed strongly with the classical "
-              "count (128 px only; at 512 px a disagreement reruns the classical search instead).", ""]
+              "Where the MV network's count vote disagreed strongly with the classical count, the "
+              "network's curves for its count regroup the classical curves (each joins the network curve "
+              "it lies along; `classic.regrouped`): classical curves regrouped. Where a network curve has "
+              "no classical curve along it, the network's own curves, refined against the ink, are "
+              "returned at 128 px (network's curves kept) and the classical curves at 512 px.", ""]
     lines += ["### Where the count goes wrong (128 px, 2 and 3 curves)", ""]
     rows = []
     multi = [r for r in per_image if r.get("classes") is not None and r["true_curves"] > 1]

@@ -13,7 +13,7 @@ def assert_counted_right(seed_base: int, cases, size: int = 128, chamfer_px: flo
                          method: str = "classic", chosen: str | None = None) -> None:
     """Each ``(n, i)`` drawing (seed ``seed_base + i``, stroke width 1, 2 or 3 px by ``i mod 3``,
     ``n`` curves) is read by ``method`` as ``n`` curves within ``chamfer_px`` (symmetric
-    Chamfer to the truth), and from the ``chosen`` source when given ("classic" or "network")."""
+    Chamfer to the truth), and from the ``chosen`` source when given ("classic", "network" or "regrouped")."""
     for n, i in cases:
         width = (1.0, 2.0, 3.0)[i % 3]
         sample = make_sample(seed_base + i, SyntheticConfig(size=(size, size), curves=(n, n), width=width))

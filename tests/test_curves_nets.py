@@ -197,7 +197,7 @@ def test_cli_network_writes_curves_json(tmp_path, capsys):
         data = json.loads((out / "curves.json").read_text())
         assert 1 <= len(data["curves"]) <= 5 and "top-left" in data["coordinates"]
         report = json.loads((out / "report.json").read_text())
-        assert report["method"] == method and report["chosen"] in ("classic", "network")
+        assert report["method"] == method and report["chosen"] in ("classic", "network", "regrouped")
         assert {"curves.svg", "overlay.png"} <= {p.name for p in out.iterdir()}
     capsys.readouterr()
 

@@ -67,11 +67,16 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       ``-2 log P(count)`` added to the description length (:func:`nurbskit.curves.classic.trace_strokes`,
       ``count_prior``); where the classical count stays less likely than the vote's
       (1-3 curves) by more than ``HYBRID_SWITCH`` nats, the MV network's curves for the
-      vote's count, refined by Chamfer against the ink (their control-point counts
-      searched, :func:`nurbskit.curves.classic.refine_counts`), are returned instead. On drawings
-      over 256 px across, where the search does not run by default, the vote is read
-      first and the search run with it only where it is surer of another count by more
-      than ``HYBRID_LARGE`` nats (the network's curves are not used there). Drawings the classical path reads as more
+      vote's count, refined by Chamfer against the ink, regroup the classical curves
+      (:func:`nurbskit.curves.classic.regrouped`: each classical curve joins the network
+      curve it lies along, and those of one network curve are fitted as one), refined
+      by Chamfer in turn (``chosen == "regrouped"``); where a network curve has no
+      classical curve along it, the network's curves themselves, their control-point
+      counts searched (:func:`nurbskit.curves.classic.refine_counts`; ``"network"``). On
+      drawings over 256 px across, where the search does not run by default, the vote
+      is read first and the search run with it only where it is surer of another count
+      by more than ``HYBRID_LARGE`` nats, then the same test, regrouping included (but
+      not the network's own curves). Drawings the classical path reads as more
       than 4 curves (sketches) keep the classical curves: the networks know 1-3; so do
       drawings whose strokes are thicker than ``HYBRID_MAX_WIDTH`` of the ink's extent
       (upsampled digits): the networks know thin strokes.
@@ -159,7 +164,7 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     shipped ``curves_mv_redrawn`` weights, the classical path alone."""
     from .classic import _PRIOR_COUNTS, fit_image
     from .classic import refine as refine_curves
-    from .classic import refine_counts
+    from .classic import refine_counts, regrouped
     from .nets.models import MAX_POINTS, MIN_POINTS
     from .nets.predict import count_probabilities, curves_of_count, load_model, redrawn
 
@@ -192,11 +197,11 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
         return curves, found
     if not 1 <= len(curves) <= _PRIOR_COUNTS:
         return curves, found
-    if "p" not in vote:
+    large = "p" not in vote
+    if large:
         # The pairing search did not run (a drawing over 256 px across: it would cost
         # several times the time of the rest). The vote first; where it disagrees with the
-        # count, the search with the vote as evidence. The network's own curves are not
-        # used at this size: refined from its coarse start they miss the ink by pixels.
+        # count, the search with the vote as evidence, then the same test as below.
         from skimage.morphology import skeletonize
 
         from .classic import _fill_slivers
@@ -207,15 +212,25 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
             return curves, found
         curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
                                     count_prior=lambda skeleton, width, ink: vote["p"], search_extent=float("inf"))
-        return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+        found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
+        if not 1 <= len(curves) <= _PRIOR_COUNTS:
+            return curves, found
     log_p = np.log(np.maximum(vote["p"], 1e-9))
     k = int(np.argmax(log_p[:3])) + 1  # the networks were trained on 1 to 3 curves
     if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_SWITCH:
         return curves, found
     start = refine_curves(curves_of_count(redrawn(vote["skeleton"]), k, grey.shape), strokes.ink, refine_iterations)
-    net = refine_counts(start, strokes.ink, refine_iterations, MIN_POINTS, MAX_POINTS)
+    joined = regrouped(curves, start, tolerance)
+    if joined is not None:  # the classical pieces, grouped as the network's curves group them
+        found.chosen = "regrouped"
+        return refine_curves(joined, strokes.ink, refine_iterations), found
+    if large:
+        # The network's own curves, refined from their coarse start, lie pixels from the
+        # true curves at this size (3.8 to 5 px on the development drawings at 512 px) and
+        # cost a second or two: the classical curves stay.
+        return curves, found
     found.chosen = "network"
-    return net, found
+    return refine_counts(start, strokes.ink, refine_iterations, MIN_POINTS, MAX_POINTS), found
 
 
 class Extraction:
@@ -225,7 +240,9 @@ class Extraction:
         ink: ``(H, W)`` bool ink mask (Otsu).
         inverted: True for light ink on a dark background.
         width: stroke width in pixels estimated by the classical path (None when it did not run).
-        chosen: the method whose curves were returned (``"classic"`` or ``"network"``).
+        chosen: whose curves were returned: ``"classic"``, ``"network"``, or
+            ``"regrouped"`` (the classical curves joined as the network's group them;
+            the hybrid method only).
         strokes: the classical path's :class:`~nurbskit.curves.classic.Strokes`, or None.
     """
 

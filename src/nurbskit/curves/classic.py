@@ -1267,6 +1267,55 @@ def refine_counts(curves: list, ink: np.ndarray, iterations: int = 20, fewest: i
     return best
 
 
+def regrouped(curves: list, guides: list, tolerance: float = 1.0) -> list | None:
+    """``curves`` joined into one curve per guide curve -> a list as long as ``guides``, or
+    None where some guide has no curve along it.
+
+    Each curve goes to the guide it lies closest to (the mean distance from its points,
+    1 px apart, to the guide's); the curves of one guide are put in order along it (by
+    the guide points nearest their two ends), each turned to run the way the guide does,
+    and their points fitted as one stroke (:func:`fit_stroke` within ``tolerance``, the
+    canonical orientation kept: first point left of the last). A guide with one curve
+    keeps that curve as it is.
+
+    Why: the hybrid method's count vote can say that the classical path split one curve
+    in two (at a sharp turn, or where the pairing at a crossing went wrong), and the
+    network's curves for the vote's count say which pieces belong together; their own
+    geometry is coarse (refined from the network's start they lie pixels from the strokes
+    at 512 px), the pieces' is not. Where the network's curves do not match the pieces
+    (a guide with none), this says so and the caller decides.
+    """
+    from .synthetic import dense_samples
+
+    if not curves or not guides:
+        return None
+    trees = [cKDTree(dense_samples(g, 1.0)) for g in guides]
+    pieces = [dense_samples(c, 1.0) for c in curves]
+    members: list[list[int]] = [[] for _ in guides]
+    for i, pts in enumerate(pieces):
+        members[int(np.argmin([tree.query(pts)[0].mean() for tree in trees]))].append(i)
+    if not all(members):
+        return None
+    out = []
+    for tree, group in zip(trees, members):
+        if len(group) == 1:
+            out.append(curves[group[0]])
+            continue
+        parts = []
+        for i in group:
+            pts = pieces[i]
+            first, last = tree.query(pts[[0, -1]])[1]
+            if first > last:  # the piece runs against the guide
+                pts, first, last = pts[::-1], last, first
+            parts.append((first + last, i, pts))
+        parts.sort(key=lambda part: part[:2])
+        joined = np.concatenate([pts for _, _, pts in parts])
+        if joined[0, 0] > joined[-1, 0]:
+            joined = joined[::-1].copy()
+        out.append(fit_stroke(joined, tolerance, measure=False)[0])
+    return out
+
+
 def chamfer_to_ink(curves: list, ink: np.ndarray, spacing: float = 0.25) -> dict:
     """Mean distances in pixels between the curves and the ink pixel centres, both ways.
 
