@@ -226,7 +226,7 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
         return refine_curves(joined, strokes.ink, refine_iterations), found
     if large:
         # The network's own curves, refined from their coarse start, lie pixels from the
-        # true curves at this size (3.8 to 5 px on the development drawings at 512 px) and
+        # true curves at this size (3.5 to 3.8 px on the development drawings at 512 px) and
         # cost a second or two: the classical curves stay.
         return curves, found
     found.chosen = "network"
