@@ -49,8 +49,9 @@ The issue's goals for the default method: <= 1 px for one curve and <= 1.5 px fo
 three, >= 90 % right counts, <= 2 px at 512 x 512, <= 2.5 px on MNIST to the ink; <= 300
 ms for a 512 x 512 drawing. The issue's test set is 2,000 images per mode; the default
 method is run on ``--count`` (default 300) per row here, the shared 2-core machine being
-heavily loaded. The counts before (``BEFORE``) are the default method's at commit 3e76e98
-(before the network's curves regrouped the classical ones), on the same seeds.
+heavily loaded. The counts before (``BEFORE``) are the default method's at commit 95c1c23
+(before a fork whose stem runs straight on into one branch stopped reading as a hairpin),
+on the same seeds.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_curves.py [--count 300] [--large 300] [--refined 100] [--mnist 300]``.
 """
@@ -105,9 +106,9 @@ def upsample(image: np.ndarray, factor: int) -> np.ndarray:
 # with the vote of the MV weights trained on the drawings themselves. (The classical path
 # alone, the default until b40661d: 96.7 / 81.7 / 66.0 %, pooled 81.4 % at 128 px; 97.0 /
 # 87.3 / 66.3 %, pooled 83.6 % at 512 px.)
-BEFORE_COMMIT = "3e76e98, hybrid, before regrouping"
+BEFORE_COMMIT = "95c1c23, hybrid, forks read as hairpins"
 BEFORE = {(128, 1): 96.7, (128, 2): 86.0, (128, 3): 90.0, (128, "1-3"): 90.9,
-          (512, 1): 97.7, (512, 2): 88.3, (512, 3): 83.0, (512, "1-3"): 89.7}
+          (512, 1): 98.0, (512, 2): 88.0, (512, 3): 89.0, (512, "1-3"): 91.7}
 
 # Failure classes, read off the true curves (not the drawing): how a count can go wrong.
 CLASSES = ("self-crossing", "end on another curve", "sharp turn", "plain")

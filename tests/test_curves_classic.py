@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nurbskit.curves.classic import (_fill_slivers, chamfer_points, chamfer_to_ink, fit_image, ink_mask, refine,
                                     refine_counts, resampled, stroke_width)
-from nurbskit.curves.synthetic import curve_of, dense_samples, render
+from nurbskit.curves.synthetic import SyntheticConfig, curve_of, dense_samples, make_sample, render
 
 from _assert import assert_close
 from _curves import assert_counted_right
@@ -73,6 +74,46 @@ def test_a_hairpin_is_one_curve():
     assert len(curves) == 1
     tip = max(float(dense_samples(c)[:, 0].max()) for c in curves)
     assert tip > 106  # the tip is kept
+
+
+def _segments(*corners):
+    return np.concatenate([np.linspace(a, b, 400) for a, b in zip(corners[:-1], corners[1:])])
+
+
+def test_a_stroke_ending_on_another_at_an_acute_angle_is_not_a_hairpin():
+    # At a "y" or a "lambda" the stem runs straight on into one branch and the other
+    # leaves at an acute angle: the fork of a hairpin (two sides merged along the stem)
+    # read as one curve walking the stem down and back up (37 to 45 control points) until
+    # the fork was required to bisect its branches.
+    drawings = {
+        "lambda": [_segments([30, 10], [100, 118]), _segments([65, 64], [30, 118])],
+        "y": [_segments([30, 10], [64, 64]), _segments([98, 10], [30, 118])],
+    }
+    for name, strokes in drawings.items():
+        for width in (1.0, 2.0, 3.0):
+            curves, _ = fit_image(_polyline_image(strokes, width=width))
+            assert len(curves) == 2, (name, width)
+            assert _symmetric(curves, strokes) < 1.0
+    # An "A" of a 4 px pen on 400 x 300 (the drawing that showed it: one curve of 131
+    # control points, its lower legs walked as hairpins, the apex 4 px off): the legs
+    # run on through the crossbar's ends.
+    legs, bar = _segments([220, 250], [300, 60], [380, 250]), _segments([250, 180], [350, 180])
+    curves, _ = fit_image(1.0 - render([legs, bar], (300, 400), 4.0))
+    assert len(curves) == 2
+    assert _symmetric(curves, [legs, bar]) < 1.0
+    spans = sorted(float(np.ptp(dense_samples(c)[:, 0])) for c in curves)  # 100 and 160 px drawn
+    assert 90 < spans[0] <= 101 and spans[1] == pytest.approx(160, abs=3)  # (ends on the legs trimmed)
+
+
+def test_a_long_hairpin_whose_stem_runs_on_into_one_side_is_still_one_curve():
+    # A curve turning back sharply, its two sides merged over 47 px of skeleton into ink
+    # about twice a stroke's width: the stem runs on into one side (18 degrees) and the
+    # other leaves at 50, as at an "A", but the ink along it is two strokes wide.
+    sample = make_sample(100_050, SyntheticConfig(size=(128, 128), width=3.0))
+    assert len(sample.curves()) == 1
+    curves, _ = fit_image(sample.image)
+    assert len(curves) == 1
+    assert _symmetric(curves, [dense_samples(c) for c in sample.curves()]) < 1.5  # (1.19: the sides merged)
 
 
 def test_two_curves_touching_near_tangentially_give_two_curves():
