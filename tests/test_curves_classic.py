@@ -82,9 +82,10 @@ def _segments(*corners):
 
 def test_a_stroke_ending_on_another_at_an_acute_angle_is_not_a_hairpin():
     # At a "y" or a "lambda" the stem runs straight on into one branch and the other
-    # leaves at an acute angle: the fork of a hairpin (two sides merged along the stem)
+    # leaves at an acute angle: the fork of a hairpin (two sides merged along the stem),
     # read as one curve walking the stem down and back up (37 to 45 control points) until
-    # the fork was required to bisect its branches.
+    # a long, one-stroke-wide dead-end stem running straight on into a branch stopped
+    # counting as one.
     drawings = {
         "lambda": [_segments([30, 10], [100, 118]), _segments([65, 64], [30, 118])],
         "y": [_segments([30, 10], [64, 64]), _segments([98, 10], [30, 118])],
@@ -106,9 +107,9 @@ def test_a_stroke_ending_on_another_at_an_acute_angle_is_not_a_hairpin():
 
 
 def test_a_long_hairpin_whose_stem_runs_on_into_one_side_is_still_one_curve():
-    # A curve turning back sharply, its two sides merged over 47 px of skeleton into ink
-    # about twice a stroke's width: the stem runs on into one side (18 degrees) and the
-    # other leaves at 50, as at an "A", but the ink along it is two strokes wide.
+    # A curve turning back sharply (the photographs benchmark's drawing 50), its two
+    # sides merged over 47 px of skeleton: the stem runs on into one side (18 degrees)
+    # and the other leaves at 50, as at an "A", but the ink along it is two strokes wide.
     sample = make_sample(100_050, SyntheticConfig(size=(128, 128), width=3.0))
     assert len(sample.curves()) == 1
     curves, _ = fit_image(sample.image)
