@@ -434,9 +434,10 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0, one_stroke=None) -> t
         if b >= 0:
             at.setdefault(b, []).append((i, 1))
 
-    def direction(end):
+    def direction(end, skip=0, span=reach):  # leaving the node, read over ``span`` pixels after ``skip``
         path = edges[end[0]][2]
-        return _direction(path if end[1] == 0 else path[::-1], reach)
+        path = path if end[1] == 0 else path[::-1]
+        return _direction(path[skip:] if len(path) > skip + 2 else path, span)
 
     def other(end):
         a, b, _ = edges[end[0]]
@@ -446,10 +447,7 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0, one_stroke=None) -> t
     cos = lambda e, f: float(dirs[e] @ dirs[f])  # noqa: E731
 
     def distant(end):  # the direction past the skeleton's bend towards the junction
-        path = edges[end[0]][2]
-        path = path if end[1] == 0 else path[::-1]
-        skip = reach // 2
-        return _direction(path[skip:] if len(path) > skip + 2 else path, 2 * reach)
+        return direction(end, reach // 2, 2 * reach)
 
     def runs_on(stem, f, g):
         """True where a long dead-end ``stem`` runs straight on into ``f`` or ``g`` and the other leaves it."""
