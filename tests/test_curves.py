@@ -83,6 +83,39 @@ def test_fit_stroke_recovers_an_exact_cubic():
     assert float(back.max()) < 0.02  # the whole true curve lies on the fit, not only the samples
 
 
+@pytest.mark.parametrize("degree", [1, 2, 3])
+@pytest.mark.parametrize("smooth", [0.0, 1e-2, 0.5])
+def test_banded_least_squares_equals_the_dense_solution(degree, smooth):
+    import torch
+
+    from nurbskit.core.basis import basis_matrix
+    from nurbskit.core.knots import clamped_uniform
+    from nurbskit.curves.classic import _banded_least_squares, _local_basis
+
+    rng = np.random.default_rng(degree)
+    n_ctrl = 23
+    u = np.sort(rng.uniform(0, 1, 200))
+    u[0], u[-1] = 0.0, 1.0
+    points = rng.normal(size=(200, 2)) * 10
+    values, first = _local_basis(n_ctrl, degree, torch.from_numpy(u), 0)
+    got = _banded_least_squares(values[:, 0], first, points, n_ctrl, smooth)
+    # Oracle: the dense system [B; smooth D] c = [points; 0] by numpy's least squares.
+    B = basis_matrix(clamped_uniform(n_ctrl, degree, dtype=torch.float64), degree, n_ctrl, torch.from_numpy(u))
+    D = np.diff(np.eye(n_ctrl), n=2, axis=0) * smooth
+    want = np.linalg.lstsq(np.vstack([B.numpy(), D]), np.vstack([points, np.zeros((n_ctrl - 2, 2))]), rcond=None)[0]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_fit_stroke_follows_a_long_wavy_stroke():
+    # 3,000 points, about 80 control points: the banded normal equations at the size of
+    # a large scan's strokes.
+    t = np.linspace(0.0, 1.0, 3000)
+    pts = np.stack([2000.0 * t, 40.0 * np.sin(60.0 * t)], axis=1)
+    curve, err = fit_stroke(pts, tolerance=0.5)
+    assert err <= 0.5
+    assert 40 <= curve.control_points.shape[0] <= 200
+
+
 def test_classic_recovers_a_drawn_spline():
     image = _draw([KNOWN])
     curves = nurbskit.curves_from_image(image)
