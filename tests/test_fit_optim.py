@@ -83,3 +83,37 @@ def test_a_pair_without_positive_curvature_drops_out():
     before = opt._direction(grad.clone())
     opt._remember(torch.tensor([0.0, 1.0, 0.0], dtype=F64), torch.tensor([0.0, -2.0, 1.0], dtype=F64))
     assert_close(opt._direction(grad.clone()), before, atol=1e-15)
+
+
+def test_it_does_not_import_torch_dynamo():
+    # torch.optim.Optimizer's constructor imports torch._dynamo on first use (0.75 s with
+    # torch 2.13): the loop's optimiser is a plain class so that a fit does not pay it.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, torch\n"
+        "from nurbskit.fit.optim import LBFGS\n"
+        "x = torch.tensor([-1.2, 1.0], dtype=torch.float64, requires_grad=True)\n"
+        "opt = LBFGS([x])\n"
+        "def closure():\n"
+        "    opt.zero_grad()\n"
+        "    loss = ((1 - x[0]) ** 2 + 100 * (x[1] - x[0] ** 2) ** 2)\n"
+        "    loss.backward()\n"
+        "    return loss\n"
+        "for _ in range(5):\n"
+        "    opt.step(closure)\n"
+        "print('torch._dynamo' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr
+
+
+def test_it_refuses_parameter_groups_and_empty_lists():
+    import pytest
+
+    x = torch.zeros(2, requires_grad=True)
+    with pytest.raises(ValueError, match="one parameter group"):
+        LBFGS([{"params": [x]}])
+    with pytest.raises(ValueError, match="empty"):
+        LBFGS([])
