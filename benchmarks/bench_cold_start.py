@@ -1,0 +1,137 @@
+"""How long does a ``nurbskit`` command take from a fresh process, and what of it is imports?
+
+Question: a user runs one command on one small input; the work itself takes a fraction
+of a second, so the process's imports can be most of what they wait for. Where does
+that time go, and does anything import more than the command needs?
+
+Method: each command runs in a fresh Python process (``subprocess``, the repository's
+``src`` first on the path), ``--repeats`` times (default 5) after one warm-up run that
+fills the file-system cache; the median wall time is reported, and whether
+``torch._dynamo`` was imported by the end (``torch.optim.Optimizer``'s constructor imports it on first use:
+0.75 s with torch 2.13 on the 2-core machine). Inputs are generated into a temporary
+folder: a 3,000-point smooth patch (``bench_fit_goals.smooth_patch``, 0.1 % noise) as
+an ``.xyz`` file and a 128 x 128 drawing of two cubic B-splines (the curves recipe, seed
+100001, 2 px strokes) as a PNG. Commands go through ``nurbskit.cli.main`` as the console
+script does; ``--threads 2`` where the command has it. Rows:
+
+* ``import torch`` and ``import nurbskit`` alone: the floor every command pays.
+* ``nurbskit fit cloud.xyz --no-figures``: the default pipeline.
+* ``nurbskit curves drawing.png``, without and with ``--refine`` (L-BFGS by
+  ``torch.optim.LBFGS``).
+
+Run: ``python benchmarks/bench_cold_start.py [--quick] [--repeats 5] [--src OTHER/src --tag NAME]``; writes
+``benchmarks/results/cold_start.json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SRC = HERE.parent / "src"
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(SRC))
+from _harness import write_results  # noqa: E402
+
+# Run in the child: the statement, then whether torch._dynamo is loaded.
+CHILD = """
+import sys
+sys.path.insert(0, {src!r})
+{statement}
+print("COLD", "torch._dynamo" in sys.modules)
+"""
+
+
+def run_child(statement: str, src: Path = SRC) -> tuple[float, bool]:
+    code = CHILD.format(src=str(src), statement=statement)
+    env = dict(os.environ, OMP_NUM_THREADS="2")
+    start = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - start
+    if out.returncode != 0:
+        raise SystemExit(f"child failed ({out.returncode}): {out.stderr.strip()[-500:]}")
+    line = [x for x in out.stdout.splitlines() if x.startswith("COLD")][-1].split()
+    return wall, line[1] == "True"
+
+
+def main_statement(argv: list[str]) -> str:
+    return f"from nurbskit.cli import main\nrc = main({argv!r})\nassert rc == 0, rc"
+
+
+def make_inputs(folder: Path) -> tuple[Path, Path]:
+    from PIL import Image
+
+    from bench_fit_goals import smooth_patch
+    from nurbskit.curves.synthetic import SyntheticConfig, make_sample
+
+    cloud = folder / "cloud.xyz"
+    np.savetxt(cloud, np.asarray(smooth_patch(3000, 0.001, 0)))
+    sample = make_sample(100_001, SyntheticConfig(size=(128, 128), curves=(2, 2), width=2.0))
+    drawing = folder / "drawing.png"
+    Image.fromarray((np.clip(sample.image, 0, 1) * 255).astype(np.uint8)).save(drawing)
+    return cloud, drawing
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="2 repeats")
+    parser.add_argument("--src", type=Path, default=SRC,
+                        help="the source tree whose nurbskit the commands run (another checkout's src, to compare)")
+    parser.add_argument("--tag", default="", help="suffix of the results' name (cold_start_TAG)")
+    args = parser.parse_args()
+    if args.quick:
+        args.repeats = 2
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        cloud, drawing = make_inputs(folder)
+        out = str(folder / "out")
+        commands = [
+            ("import torch", "import torch"),
+            ("import nurbskit", "import nurbskit"),
+            ("nurbskit fit cloud.xyz (3,000 points, default pipeline)",
+             main_statement(["fit", str(cloud), "--out", out, "--overwrite", "--no-figures", "--quiet",
+                             "--threads", "2"])),
+            ("nurbskit curves drawing.png (128 px, 2 curves)",
+             main_statement(["curves", str(drawing), "--out", out, "--overwrite"])),
+            ("nurbskit curves drawing.png --refine",
+             main_statement(["curves", str(drawing), "--out", out, "--overwrite", "--refine"])),
+        ]
+        rows = []
+        for label, statement in commands:
+            run_child(statement, args.src)  # warm-up: the file-system cache
+            walls, dynamo = [], []
+            for _ in range(args.repeats):
+                wall, d = run_child(statement, args.src)
+                walls.append(wall)
+                dynamo.append(d)
+            rows.append({"command": label, "wall_s_median": statistics.median(walls), "wall_s_min": min(walls),
+                         "torch_dynamo_imported": all(dynamo), "repeats": args.repeats})
+            print(rows[-1], flush=True)
+    floor = rows[0]["wall_s_median"]
+    for r in rows:
+        r["beyond_import_torch_s"] = r["wall_s_median"] - floor
+    columns = [("command", "command"), ("wall_s_median", "wall s, median"), ("wall_s_min", "wall s, min"),
+               ("beyond_import_torch_s", "beyond `import torch`, s"),
+               ("torch_dynamo_imported", "torch._dynamo imported")]
+    notes = ("Fresh processes, median of the repeats after a warm-up run (method in the module docstring). "
+             "`torch._dynamo` is imported by `torch.optim.Optimizer`'s constructor on first use; the fitting "
+             "loop's L-BFGS is a plain class since the sixteenth session (`nurbskit.fit.optim`), the curves' "
+             "Chamfer refinement still steps `torch.optim.LBFGS`. Load averages at the end: "
+             + ", ".join(f"{v:.1f}" for v in os.getloadavg()) + ".")
+    name = "cold_start" + (f"_{args.tag}" if args.tag else "")
+    print(write_results(name, rows, columns, meta={"repeats": args.repeats, "src": str(args.src)},
+                        title="nurbskit commands from a fresh process", notes=notes))
+
+
+if __name__ == "__main__":
+    main()
