@@ -19,7 +19,7 @@ script does; ``--threads 2`` where the command has it. Rows:
 * ``nurbskit curves drawing.png``, without and with ``--refine`` (L-BFGS by
   ``torch.optim.LBFGS``).
 
-Run: ``python benchmarks/bench_cold_start.py [--quick] [--repeats 5] [--src OTHER/src --tag NAME]``; writes
+Run: ``python benchmarks/bench_cold_start.py [--quick] [--repeats 5] [--before OTHER/src] [--tag NAME]``; writes
 ``benchmarks/results/cold_start.json`` and ``.md``.
 """
 
@@ -85,8 +85,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="2 repeats")
-    parser.add_argument("--src", type=Path, default=SRC,
-                        help="the source tree whose nurbskit the commands run (another checkout's src, to compare)")
+    parser.add_argument("--src", type=Path, default=SRC, help="the source tree whose nurbskit the commands run")
+    parser.add_argument("--before", type=Path, default=None,
+                        help="another checkout's src, run interleaved with --src (before, after, before, ...) "
+                             "for a comparison made at the same time")
+    parser.add_argument("--before-label", default="", help="what --before is, for the notes (a commit)")
     parser.add_argument("--tag", default="", help="suffix of the results' name (cold_start_TAG)")
     args = parser.parse_args()
     if args.quick:
@@ -106,30 +109,46 @@ def main() -> None:
             ("nurbskit curves drawing.png --refine",
              main_statement(["curves", str(drawing), "--out", out, "--overwrite", "--refine"])),
         ]
+        trees = {"": args.src} | ({"before_": args.before} if args.before else {})
         rows = []
         for label, statement in commands:
-            run_child(statement, args.src)  # warm-up: the file-system cache
-            walls, dynamo = [], []
+            row = {"command": label, "repeats": args.repeats}
+            for src in trees.values():
+                run_child(statement, src)  # warm-up: the file-system cache
+            walls = {key: [] for key in trees}
+            dynamo = {key: [] for key in trees}
             for _ in range(args.repeats):
-                wall, d = run_child(statement, args.src)
-                walls.append(wall)
-                dynamo.append(d)
-            rows.append({"command": label, "wall_s_median": statistics.median(walls), "wall_s_min": min(walls),
-                         "torch_dynamo_imported": all(dynamo), "repeats": args.repeats})
-            print(rows[-1], flush=True)
-    floor = rows[0]["wall_s_median"]
-    for r in rows:
-        r["beyond_import_torch_s"] = r["wall_s_median"] - floor
+                for key, src in trees.items():  # interleaved: the same moment's machine for both
+                    wall, d = run_child(statement, src)
+                    walls[key].append(wall)
+                    dynamo[key].append(d)
+            for key in trees:
+                row[key + "wall_s_median"] = statistics.median(walls[key])
+                row[key + "wall_s_min"] = min(walls[key])
+                row[key + "torch_dynamo_imported"] = all(dynamo[key])
+            rows.append(row)
+            print(row, flush=True)
+    for key in trees:
+        floor = rows[0][key + "wall_s_median"]
+        for r in rows:
+            r[key + "beyond_import_torch_s"] = r[key + "wall_s_median"] - floor
     columns = [("command", "command"), ("wall_s_median", "wall s, median"), ("wall_s_min", "wall s, min"),
                ("beyond_import_torch_s", "beyond `import torch`, s"),
                ("torch_dynamo_imported", "torch._dynamo imported")]
+    if args.before:
+        columns += [("before_wall_s_median", "before: wall s, median"),
+                    ("before_beyond_import_torch_s", "before: beyond `import torch`, s"),
+                    ("before_torch_dynamo_imported", "before: torch._dynamo imported")]
     notes = ("Fresh processes, median of the repeats after a warm-up run (method in the module docstring). "
-             "`torch._dynamo` is imported by `torch.optim.Optimizer`'s constructor on first use; the fitting "
-             "loop's L-BFGS is a plain class since the sixteenth session (`nurbskit.fit.optim`), the curves' "
-             "Chamfer refinement still steps `torch.optim.LBFGS`. Load averages at the end: "
-             + ", ".join(f"{v:.1f}" for v in os.getloadavg()) + ".")
+             "`torch._dynamo` is imported by `torch.optim.Optimizer`'s constructor on first use; nurbskit's "
+             "one L-BFGS (`nurbskit.fit.optim`: the fitting loop, the curves' Chamfer refinement, the shape and "
+             "volume fits) is a plain class since the sixteenth session. "
+             + (f"Before: the commands run from {args.before_label or args.before}, interleaved with these. "
+                if args.before else "")
+             + "Load averages at the end: " + ", ".join(f"{v:.1f}" for v in os.getloadavg()) + ".")
     name = "cold_start" + (f"_{args.tag}" if args.tag else "")
-    print(write_results(name, rows, columns, meta={"repeats": args.repeats, "src": str(args.src)},
+    meta = {"repeats": args.repeats, "before": args.before_label or (str(args.before) if args.before else None)}
+    print(write_results(name, rows, columns, meta=meta,
                         title="nurbskit commands from a fresh process", notes=notes))
 
 

@@ -117,3 +117,33 @@ def test_it_refuses_parameter_groups_and_empty_lists():
         LBFGS([{"params": [x]}])
     with pytest.raises(ValueError, match="empty"):
         LBFGS([])
+
+
+def test_run_takes_the_iterations_of_one_torch_lbfgs_step():
+    # run(max_iter) is one step of torch.optim.LBFGS(max_iter=...) with the strong Wolfe
+    # search and torch's defaults: the same iterates, evaluation budget and early stops.
+    start = torch.tensor([-1.2, 1.0, -0.5, 0.8, 1.5], dtype=F64)
+    cases = [(100, 5, None), (100, 20, None), (100, 60, None), (100, 40, 12), (100, 200, None), (3, 200, None)]
+    for history, max_iter, max_eval in cases:
+        ours = start.clone().requires_grad_()
+        theirs = start.clone().requires_grad_()
+        a = LBFGS([ours], lr=1.0, history_size=history)
+        b = torch.optim.LBFGS([theirs], lr=1.0, max_iter=max_iter, max_eval=max_eval, history_size=history,
+                              line_search_fn="strong_wolfe")
+        evals = {"a": 0, "b": 0}
+
+        def counted(name, opt, x):
+            inner = _closure(opt, x, _rosenbrock)
+
+            def closure():
+                evals[name] += 1
+                return inner()
+            return closure
+
+        la = a.run(counted("a", a, ours), max_iter, max_eval)
+        lb = b.step(counted("b", b, theirs))
+        assert_close(la.detach(), lb.detach(), atol=0.0)
+        assert evals["a"] == evals["b"], (max_iter, evals)
+        assert torch.equal(ours.detach(), theirs.detach()), (history, max_iter, max_eval)  # to the last bit
+        if max_iter == 200:  # converged: the early stops (a loss change under 1e-9) ended both
+            assert float(_rosenbrock(ours.detach())) < 1e-8

@@ -1323,11 +1323,15 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
     """Control points of every curve moved by L-BFGS to lower the Chamfer distance to the ink.
 
     The loss is ``nurbskit.losses.chamfer_distance`` between all curves' samples (about
-    ``spacing`` px apart) and the ink pixels' centres; knots and degree stay.
+    ``spacing`` px apart) and the ink pixels' centres; knots and degree stay. The fitting
+    loop's L-BFGS (:meth:`nurbskit.fit.optim.LBFGS.run`: ``torch.optim.LBFGS``'s
+    iterations, strong Wolfe search, its defaults; not a ``torch.optim.Optimizer``, so no
+    ``torch._dynamo`` import).
     """
     import torch
 
     from ..core import NURBSCurve
+    from ..fit.optim import LBFGS
     from ..losses import chamfer_distance
 
     if not curves:
@@ -1339,7 +1343,7 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
         cp = c.control_points.detach().numpy()
         counts.append(int(np.clip(np.linalg.norm(np.diff(cp, axis=0), axis=1).sum() / spacing, 16, 4096)))
     us = [torch.linspace(0, 1, m, dtype=torch.float64) for m in counts]
-    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, line_search_fn="strong_wolfe")
+    opt = LBFGS(params, lr=1.0, history_size=100)
 
     def closure():
         opt.zero_grad()
@@ -1349,7 +1353,7 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
         loss.backward()
         return loss
 
-    opt.step(closure)
+    opt.run(closure, max_iter=iterations)
     return [NURBSCurve(p.detach(), degree=c.degree, knot_vector=c.knot_vector) for p, c in zip(params, curves)]
 
 

@@ -253,7 +253,7 @@ def eliminated_control_points(surface, target: Target, topology) -> Tensor:
     )
 
 
-def make_optimizer(stage: StageConfig, tensors: list[Tensor]) -> torch.optim.Optimizer:
+def make_optimizer(stage: StageConfig, tensors: list[Tensor]) -> torch.optim.Optimizer | LBFGS:
     """Adam, SGD (momentum 0.9) or L-BFGS (:class:`.optim.LBFGS`, strong Wolfe line search) over ``tensors``."""
     if stage.optimizer == "adam":
         return torch.optim.Adam(tensors, lr=stage.lr)

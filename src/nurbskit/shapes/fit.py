@@ -37,6 +37,7 @@ from ..core.curve import NURBSCurve
 from ..core.project import project_points
 from ..core.surface import NURBSSurface
 from ..errors import InputError, OptionError
+from ..fit.optim import LBFGS
 from .axis import extrusion_direction, revolution_axis
 from .init import INITS, network_guess, plane_basis
 from .normals import estimate_normals
@@ -186,8 +187,7 @@ def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
         g = torch.Generator().manual_seed(0)
         points = points[torch.randperm(points.shape[0], generator=g)[:REFINE_POINTS]]
     state = {"uv": None, "evals": 0, "best": [], "best_params": None}
-    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, history_size=10,
-                            line_search_fn="strong_wolfe", tolerance_grad=1e-12, tolerance_change=1e-15)
+    opt = LBFGS(params, lr=1.0, history_size=10)  # the fitting loop's; run() is torch's L-BFGS step
     scale = float((points.amax(0) - points.amin(0)).norm()) ** 2
 
     def closure():
@@ -213,7 +213,7 @@ def _lbfgs(params: list[Tensor], build, points: Tensor, iterations: int):
         return loss
 
     try:
-        opt.step(closure)
+        opt.run(closure, max_iter=iterations, tolerance_grad=1e-12, tolerance_change=1e-15)
     except (torch.linalg.LinAlgError, _Plateau):
         # a degenerate trial surface, or a plateau reached inside a line search: the
         # parameters may hold a trial point; go back to the best evaluated one

@@ -29,6 +29,7 @@ import torch
 from ..core.knots import clamped_uniform
 from ..core.volume import NURBSVolume
 from ..errors import InputError, NurbskitError
+from ..fit.optim import LBFGS
 from .config import VolumeFitConfig, check_fit_size, config_to_dict, default_config
 from .drawings import load_drawing, mask_on_plane, resample
 from .field import GridField
@@ -302,10 +303,9 @@ def fit_silhouettes(
     if cfg.iterations > 0:
         # One L-BFGS iteration per step (its curvature pairs persist between steps); the
         # strong Wolfe line search may evaluate the cost up to 25 times per iteration.
-        optimizer = torch.optim.LBFGS(
-            list(trained), lr=1.0, max_iter=1, max_eval=25, history_size=10,
-            tolerance_change=0.0, tolerance_grad=0.0, line_search_fn="strong_wolfe",
-        )
+        # (The fitting loop's L-BFGS: torch's iterations, without torch.optim.Optimizer's
+        # import of torch._dynamo.)
+        optimizer = LBFGS(list(trained), lr=1.0, history_size=10)
         grad_tolerance = 1e-7 if cfg.tolerance > 0 else 0.0
 
         def closure():
@@ -313,7 +313,7 @@ def fit_silhouettes(
 
         for _ in range(cfg.iterations):
             recorder.mark()
-            optimizer.step(closure)
+            optimizer.run(closure, max_iter=1, max_eval=25, tolerance_grad=0.0, tolerance_change=0.0)
             iterations_run += 1
             if grad_tolerance and _max_grad(trained) <= grad_tolerance:
                 break
