@@ -170,7 +170,8 @@ def synthetic_row(seed: int, n_curves: int, size: int, refine: int = 0, stages: 
     row = {"set": label, "seed": 100_000 + seed, "width": width,
            "fit_to_truth": ch["curves_to_ink"], "truth_to_fit": ch["ink_to_curves"], "symmetric": ch["symmetric"],
            "curves": len(curves), "true_curves": n_curves, "count_right": len(curves) == n_curves,
-           "seconds": seconds, "cpu_seconds": cpu, "chosen": found.chosen}
+           "seconds": seconds, "cpu_seconds": cpu, "chosen": found.chosen,
+           "control_points": [int(c.control_points.shape[0]) for c in curves]}
     if size == 128 and not refine:
         row["classes"], row["ambiguous"] = truth_classes(sample, width)
     if stages:  # each stage on its own call; fitting is the rest
@@ -201,7 +202,8 @@ def digit_row(index: int, digit: np.ndarray, factor: int, label: str,
     ch = chamfer_to_ink(curves, found.ink)
     return ({"set": f"{label}, {name}", "seed": index, "cpu_seconds": cpu, "fit_to_truth": ch["curves_to_ink"],
              "truth_to_fit": ch["ink_to_curves"], "symmetric": ch["symmetric"], "curves": len(curves),
-             "inverted": found.inverted, "seconds": seconds}, image, curves)
+             "inverted": found.inverted, "seconds": seconds,
+             "control_points": [int(c.control_points.shape[0]) for c in curves]}, image, curves)
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -221,6 +223,8 @@ def summarise(rows: list[dict]) -> list[dict]:
             "cpu_p90": float(np.percentile([r["cpu_seconds"] for r in rs], 90)),
             "cpu_over_300ms": sum(r["cpu_seconds"] > 0.3 for r in rs),
             "cpu_max": max(r["cpu_seconds"] for r in rs),
+            "control_points_mean": statistics.fmean([n for r in rs for n in r["control_points"]] or [0]),
+            "control_points_max": max(max(r["control_points"], default=0) for r in rs),
         }
         for stage in ("cpu_ink", "cpu_trace", "cpu_fit"):
             if stage in rs[0]:
@@ -432,9 +436,10 @@ def report(summary: list[dict], args, skipped: dict[str, str], per_image: list[d
               "Stages: medians of each stage timed on its own call.", ""]
     lines += ["## All sets", ""]
     rows = [[r["set"], r["images"], r["symmetric_mean"], r["symmetric_median"], r["symmetric_p90"],
-             r.get("count_accuracy", ""), 1000 * r["cpu_median"], 1000 * r["seconds_median"]] for r in summary]
-    lines += _table(["set", "images", "Chamfer mean", "median", "p90", "count right", "CPU ms median",
-                     "wall ms median"], rows)
+             r.get("count_accuracy", ""), r["control_points_mean"], r["control_points_max"],
+             1000 * r["cpu_median"], 1000 * r["seconds_median"]] for r in summary]
+    lines += _table(["set", "images", "Chamfer mean", "median", "p90", "count right", "control points per curve, mean",
+                     "max", "CPU ms median", "wall ms median"], rows)
     return "\n".join(lines)
 
 

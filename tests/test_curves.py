@@ -89,7 +89,6 @@ def test_banded_least_squares_equals_the_dense_solution(degree, smooth):
     import torch
 
     from nurbskit.core.basis import basis_matrix
-    from nurbskit.core.knots import clamped_uniform
     from nurbskit.curves.classic import _banded_least_squares, _local_basis
 
     rng = np.random.default_rng(degree)
@@ -97,10 +96,14 @@ def test_banded_least_squares_equals_the_dense_solution(degree, smooth):
     u = np.sort(rng.uniform(0, 1, 200))
     u[0], u[-1] = 0.0, 1.0
     points = rng.normal(size=(200, 2)) * 10
-    values, first = _local_basis(n_ctrl, degree, torch.from_numpy(u), 0)
+    # uneven interior knots (as fit_stroke places them), one of them doubled
+    interior = np.sort(rng.uniform(0.05, 0.95, n_ctrl - degree - 2))
+    interior = np.sort(np.append(interior, interior[3]))
+    knots = np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
+    values, first = _local_basis(knots, degree, torch.from_numpy(u), 0)
     got = _banded_least_squares(values[:, 0], first, points, n_ctrl, smooth)
     # Oracle: the dense system [B; smooth D] c = [points; 0] by numpy's least squares.
-    B = basis_matrix(clamped_uniform(n_ctrl, degree, dtype=torch.float64), degree, n_ctrl, torch.from_numpy(u))
+    B = basis_matrix(torch.from_numpy(knots), degree, n_ctrl, torch.from_numpy(u))
     D = np.diff(np.eye(n_ctrl), n=2, axis=0) * smooth
     want = np.linalg.lstsq(np.vstack([B.numpy(), D]), np.vstack([points, np.zeros((n_ctrl - 2, 2))]), rcond=None)[0]
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
@@ -115,6 +118,24 @@ def test_fit_stroke_follows_a_long_wavy_stroke():
     assert err <= 0.5
     assert 40 <= curve.control_points.shape[0] <= 200
 
+
+
+def test_fit_stroke_puts_its_knots_where_the_stroke_bends():
+    # 1,000 px straight, then 100 px of tight waves: the waves need knots, the line none.
+    x = np.arange(0.0, 1100.0, 0.5)
+    y = np.where(x < 1000.0, 0.0, 8.0 * np.sin((x - 1000.0) / 100.0 * 6.0 * np.pi))
+    pts = np.stack([x, y], axis=1)
+    curve, err = fit_stroke(pts, tolerance=0.5)
+    assert err <= 0.5
+    knots = curve.knot_vector.numpy()[4:-4]
+    chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+    u_wave = chord[x == 1000.0][0] / chord[-1]  # where the waves begin (about 0.885)
+    assert (knots > u_wave - 0.02).sum() >= 15  # the waves hold the knots ...
+    assert (knots < 0.7).sum() <= 3  # ... the first 700 px of line next to none
+    # uniform knots spread their spans over the line too: several times the control points
+    from nurbskit.curves.classic import _control_points_needed
+
+    assert 4 * curve.control_points.shape[0] < _control_points_needed(pts, 0.5)[0]
 
 def test_classic_recovers_a_drawn_spline():
     image = _draw([KNOWN])
