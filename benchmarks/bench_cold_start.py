@@ -7,8 +7,10 @@ that time go, and does anything import more than the command needs?
 Method: each command runs in a fresh Python process (``subprocess``, the repository's
 ``src`` first on the path), ``--repeats`` times (default 5) after one warm-up run that
 fills the file-system cache; the median wall time is reported, and whether
-``torch._dynamo`` was imported by the end (``torch.optim.Optimizer``'s constructor imports it on first use:
-0.75 s with torch 2.13 on the 2-core machine). Inputs are generated into a temporary
+``torch._dynamo`` and ``sympy`` were imported by the end (``torch.optim.Optimizer``'s constructor imports
+the first on first use, 0.75 s with torch 2.13 on the 2-core machine; ``torch.broadcast_shapes``
+the second, 0.3 s). "Beyond ``import torch``" is a command's median less that of ``import torch``
+alone (``import nurbskit`` imports no torch). Inputs are generated into a temporary
 folder: a 3,000-point smooth patch (``bench_fit_goals.smooth_patch``, 0.1 % noise) as
 an ``.xyz`` file and a 128 x 128 drawing of two cubic B-splines (the curves recipe, seed
 100001, 2 px strokes) as a PNG. Commands go through ``nurbskit.cli.main`` as the console
@@ -16,8 +18,8 @@ script does; ``--threads 2`` where the command has it. Rows:
 
 * ``import torch`` and ``import nurbskit`` alone: the floor every command pays.
 * ``nurbskit fit cloud.xyz --no-figures``: the default pipeline.
-* ``nurbskit curves drawing.png``, without and with ``--refine`` (L-BFGS by
-  ``torch.optim.LBFGS``).
+* ``nurbskit curves drawing.png``, without and with ``--refine`` (Chamfer against the ink by
+  ``nurbskit.fit.optim.LBFGS``).
 
 Run: ``python benchmarks/bench_cold_start.py [--quick] [--repeats 5] [--before OTHER/src] [--tag NAME]``; writes
 ``benchmarks/results/cold_start.json`` and ``.md``.
@@ -42,16 +44,16 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(SRC))
 from _harness import write_results  # noqa: E402
 
-# Run in the child: the statement, then whether torch._dynamo is loaded.
+# Run in the child: the statement, then whether the slow imports happened.
 CHILD = """
 import sys
 sys.path.insert(0, {src!r})
 {statement}
-print("COLD", "torch._dynamo" in sys.modules)
+print("COLD", "torch._dynamo" in sys.modules, "sympy" in sys.modules)
 """
 
 
-def run_child(statement: str, src: Path = SRC) -> tuple[float, bool]:
+def run_child(statement: str, src: Path = SRC) -> tuple[float, str]:
     code = CHILD.format(src=str(src), statement=statement)
     env = dict(os.environ, OMP_NUM_THREADS="2")
     start = time.perf_counter()
@@ -60,7 +62,8 @@ def run_child(statement: str, src: Path = SRC) -> tuple[float, bool]:
     if out.returncode != 0:
         raise SystemExit(f"child failed ({out.returncode}): {out.stderr.strip()[-500:]}")
     line = [x for x in out.stdout.splitlines() if x.startswith("COLD")][-1].split()
-    return wall, line[1] == "True"
+    loaded = [name for name, flag in zip(("torch._dynamo", "sympy"), line[1:]) if flag == "True"]
+    return wall, ", ".join(loaded) or "neither"
 
 
 def main_statement(argv: list[str]) -> str:
@@ -116,33 +119,35 @@ def main() -> None:
             for src in trees.values():
                 run_child(statement, src)  # warm-up: the file-system cache
             walls = {key: [] for key in trees}
-            dynamo = {key: [] for key in trees}
+            loaded = {key: [] for key in trees}
             for _ in range(args.repeats):
                 for key, src in trees.items():  # interleaved: the same moment's machine for both
-                    wall, d = run_child(statement, src)
+                    wall, slow = run_child(statement, src)
                     walls[key].append(wall)
-                    dynamo[key].append(d)
+                    loaded[key].append(slow)
             for key in trees:
                 row[key + "wall_s_median"] = statistics.median(walls[key])
                 row[key + "wall_s_min"] = min(walls[key])
-                row[key + "torch_dynamo_imported"] = all(dynamo[key])
+                row[key + "slow_imports"] = loaded[key][-1]
             rows.append(row)
             print(row, flush=True)
     for key in trees:
         floor = rows[0][key + "wall_s_median"]
-        for r in rows:
+        for r in rows[2:]:  # the commands; import nurbskit imports no torch
             r[key + "beyond_import_torch_s"] = r[key + "wall_s_median"] - floor
     columns = [("command", "command"), ("wall_s_median", "wall s, median"), ("wall_s_min", "wall s, min"),
                ("beyond_import_torch_s", "beyond `import torch`, s"),
-               ("torch_dynamo_imported", "torch._dynamo imported")]
+               ("slow_imports", "torch._dynamo, sympy imported")]
     if args.before:
         columns += [("before_wall_s_median", "before: wall s, median"),
                     ("before_beyond_import_torch_s", "before: beyond `import torch`, s"),
-                    ("before_torch_dynamo_imported", "before: torch._dynamo imported")]
+                    ("before_slow_imports", "before: imported")]
     notes = ("Fresh processes, median of the repeats after a warm-up run (method in the module docstring). "
              "`torch._dynamo` is imported by `torch.optim.Optimizer`'s constructor on first use; nurbskit's "
              "one L-BFGS (`nurbskit.fit.optim`: the fitting loop, the curves' Chamfer refinement, the shape and "
-             "volume fits) is a plain class since the sixteenth session. "
+             "volume fits) is a plain class since the sixteenth session. `sympy` is imported by "
+             "`torch.broadcast_shapes` on first use (the Chamfer loss, a batched evaluation); nurbskit takes "
+             "numpy's since the seventeenth. "
              + (f"Before: the commands run from {args.before_label or args.before}, interleaved with these. "
                 if args.before else "")
              + "Load averages at the end: " + ", ".join(f"{v:.1f}" for v in os.getloadavg()) + ".")

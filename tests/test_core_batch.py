@@ -101,6 +101,11 @@ def test_batch_shapes_and_broadcasting():
     one = NURBSSurface(b.control_points[0, 0], (3, 3), b.knot_vectors, b.weights[0, 0])
     # a single spline keeps any leading parameter axes, as before
     assert one.evaluate(torch.rand(4, 7, 2, dtype=F64)).shape == (4, 7, 3)
+    # parameters whose batch does not broadcast: a one-line error naming both shapes
+    with pytest.raises(NurbskitError, match=r"batch shape \(4, 7\) does not broadcast with the surface's \(2, 3\)"):
+        b.evaluate(torch.rand(4, 7, 5, 2, dtype=F64))
+    with pytest.raises(NurbskitError, match="does not broadcast"):
+        b.derivatives(torch.rand(3, 3, 5, 2, dtype=F64), order=1)
 
 
 def test_gradcheck_on_a_batch():

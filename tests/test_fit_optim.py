@@ -109,6 +109,26 @@ def test_it_does_not_import_torch_dynamo():
     assert out.stdout.strip() == "False", out.stdout + out.stderr
 
 
+def test_a_fit_imports_neither_torch_dynamo_nor_sympy():
+    # Both cost a command from a fresh process: torch._dynamo 0.75 s (an Optimizer's
+    # constructor), sympy 0.3 s (torch.broadcast_shapes on first use, with torch 2.13).
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np, torch, nurbskit\n"
+        "t = np.linspace(0, 1, 20)\n"
+        "u, v = np.meshgrid(t, t)\n"
+        "cloud = np.stack([u, v, np.sin(3 * u) * v], -1).reshape(-1, 3)\n"
+        "nurbskit.fit_surface(cloud)\n"
+        "from nurbskit.losses import chamfer_distance\n"
+        "chamfer_distance(torch.rand(5, 3), torch.rand(6, 3))  # the report's metric\n"
+        "print('torch._dynamo' in sys.modules, 'sympy' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False False", out.stdout + out.stderr
+
+
 def test_it_refuses_parameter_groups_and_empty_lists():
     import pytest
 

@@ -22,6 +22,7 @@ nearest neighbour is unique, and memory stays ``O(N + M)`` on CPU.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -74,8 +75,8 @@ def _directed_sq_dists(x: Tensor, y: Tensor) -> tuple[Tensor, Tensor]:
             f"both point clouds need at least one point; got x {tuple(x.shape)} and y {tuple(y.shape)}"
         )
     try:
-        batch = torch.broadcast_shapes(x.shape[:-2], y.shape[:-2])
-    except RuntimeError:
+        batch = np.broadcast_shapes(x.shape[:-2], y.shape[:-2])  # torch's imports sympy (0.3 s)
+    except ValueError:
         raise NurbskitError(
             f"the batch shapes of x {tuple(x.shape)} and y {tuple(y.shape)} do not broadcast"
         ) from None

@@ -243,11 +243,18 @@ class TensorSpline:
     def _params(self, params) -> Tensor:
         t = _as_tensor(params, self.dtype, self.device)
         if self.para_dim == 1:
-            return t.unsqueeze(-1)
-        if t.ndim < 2 or t.shape[-1] != self.para_dim:
+            t = t.unsqueeze(-1)
+        elif t.ndim < 2 or t.shape[-1] != self.para_dim:
             raise NurbskitError(
                 f"{self.kind} parameters must have shape (..., M, {self.para_dim}), got {tuple(t.shape)}"
             )
+        try:
+            np.broadcast_shapes(self.batch_shape, t.shape[:-2])
+        except ValueError:
+            raise NurbskitError(
+                f"the parameters' batch shape {tuple(t.shape[:-2])} does not broadcast with the "
+                f"{self.kind}'s {self.batch_shape}"
+            ) from None
         return t
 
     def _check_domain(self, t: Tensor, extrapolate: bool, grid_axis: int | None = None, given=None) -> None:

@@ -47,6 +47,7 @@ from collections import OrderedDict
 from math import comb
 from typing import Callable, Sequence
 
+import numpy as np
 import torch
 
 from .basis import (basis_function_derivatives, basis_functions, basis_matrices, basis_matrix, knot_window,
@@ -311,7 +312,7 @@ def _local(Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], p
             h = _contract(_gather_blocks(Pw, spans, degrees), bases)
             h = h.reshape(P + (M,) + h.shape[1:])
     else:
-        Bout = torch.broadcast_shapes(B, P)
+        Bout = np.broadcast_shapes(B, P)  # torch's imports sympy on first use (0.3 s)
         Bt = math.prod(Bout)
         prm = params.expand(Bout + (M, k)).reshape(Bt, M, k)
         kvs = [kv if kv.ndim == 1 else kv.expand(Bout + kv.shape[-1:]).reshape(Bt, -1) for kv in knot_vectors]
