@@ -279,3 +279,29 @@ def test_guides_refined_on_the_reduced_ink_land_on_the_full_size_strokes():
     before = chamfer_points(np.concatenate([dense_samples(c) for c in shifted]), truth_pts)["symmetric"]
     after = chamfer_points(np.concatenate([dense_samples(c) for c in guides]), truth_pts)["symmetric"]
     assert before > 6.0 and after < 1.0, (before, after)  # 0.21 px (0.11 px refined at full size)
+
+
+def test_the_refinements_sample_matrix_evaluates_every_curve():
+    # S @ cat(P) must be each curve's points at uniform parameters, curve after curve:
+    # the core's evaluation is the oracle (uneven knots, degrees 1 to 3).
+    import torch
+
+    from nurbskit.core import NURBSCurve
+    from nurbskit.curves.classic import _sample_matrix
+
+    rng = np.random.default_rng(3)
+    curves = []
+    for degree, n in ((3, 9), (1, 4), (2, 6), (3, 4)):
+        interior = np.sort(rng.uniform(0.1, 0.9, n - degree - 1))
+        knots = np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
+        curves.append(NURBSCurve(torch.from_numpy(rng.uniform(0, 100, (n, 2))), degree=degree,
+                                 knot_vector=torch.from_numpy(knots)))
+    S = _sample_matrix(curves, 0.5)
+    got = torch.sparse.mm(S, torch.cat([c.control_points for c in curves]))
+    want, start = [], 0
+    for c in curves:
+        m = int(np.clip(np.linalg.norm(np.diff(c.control_points.numpy(), axis=0), axis=1).sum() / 0.5, 16, 4096))
+        want.append(c.evaluate(torch.linspace(0, 1, m, dtype=torch.float64)))
+    want = torch.cat(want)
+    assert got.shape == want.shape and S.shape[1] == sum(len(c.control_points) for c in curves)
+    assert float((got - want).abs().max()) < 1e-11

@@ -10,6 +10,7 @@ import pytest
 from PIL import Image
 
 from nurbskit.cli import main
+from nurbskit.errors import InputError
 from nurbskit.core.serialize import from_dict
 from nurbskit.curves.classic import chamfer_points
 from nurbskit.curves.synthetic import curve_of, dense_samples, render
@@ -97,6 +98,21 @@ def test_curves_decompression_bomb_is_refused(tmp_path, capsys, monkeypatch):
     assert "too large" in capsys.readouterr().err
 
 
+def test_curves_an_image_that_would_not_fit_in_memory_is_refused(tmp_path, capsys, monkeypatch):
+    import nurbskit.io._base as base
+
+    src = _write(tmp_path / "big.png", np.ones((64, 64)))
+    monkeypatch.setattr(base, "available_memory", lambda: 100_000)  # 64 x 64 x 96 bytes = 393,216
+    assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "big.png" in err and "64 x 64 image" in err and "of memory but only" in err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(InputError, match="64 x 64 image needs about 384.0 KB"):  # the API, an array
+        import nurbskit
+
+        nurbskit.curves_from_image(np.ones((64, 64)))
+
+
 def test_curves_a_dot_gives_no_curve_and_valid_json(tmp_path, capsys):
     grey = np.ones((64, 64))
     grey[30:33, 30:33] = 0.0
@@ -106,3 +122,35 @@ def test_curves_a_dot_gives_no_curve_and_valid_json(tmp_path, capsys):
     report = json.loads((tmp_path / "o" / "report.json").read_text())  # strict JSON: no Infinity
     assert report["curves"] == 0 and report["chamfer_px"]["symmetric"] is None
     assert json.loads((tmp_path / "o" / "curves.json").read_text())["curves"] == []
+
+
+def test_curves_report_their_stages_as_progress():
+    from nurbskit.curves.api import extract
+
+    a = KNOWN
+    b = np.array([[10.0, 20.0], [60.0, 60.0], [100.0, 40.0], [150.0, 110.0]])
+    ink = render([dense_samples(curve_of(a)), dense_samples(curve_of(b))], (128, 160), 2.0)
+    seen = []
+    curves, _ = extract(1.0 - ink, method="classic", refine=True, refine_iterations=8,
+                        progress=lambda stage, done, total: seen.append((stage, done, total)))
+    stages = [s for i, (s, _, _) in enumerate(seen) if i == 0 or seen[i - 1][0] != s]
+    assert stages == ["tracing strokes", "fitting strokes", "refining"]
+    fitting = [(d, t) for s, d, t in seen if s == "fitting strokes"]
+    assert [d for d, _ in fitting] == list(range(len(fitting))) and all(t == len(fitting) for _, t in fitting)
+    refining = [(d, t) for s, d, t in seen if s == "refining"]
+    assert [d for d, _ in refining] == list(range(1, len(refining) + 1)) and all(t == 10 for _, t in refining)
+    assert len(curves) == 2
+
+
+def test_stage_bars_draw_each_stage_on_stderr_unless_quiet(capsys):
+    from nurbskit.cli._progress import StageBars
+
+    for quiet in (False, True):
+        bars = StageBars(quiet)
+        for stage in ("tracing strokes", "fitting strokes"):
+            for done in range(3):
+                bars(stage, done, 2)
+        bars.close()
+        err = capsys.readouterr().err
+        assert ("tracing strokes" in err and "fitting strokes" in err) is not quiet
+        assert quiet is (err == "")

@@ -108,6 +108,28 @@ def test_chamfer_gradient_equals_naive_gradient():
         torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-14)
 
 
+def test_a_kept_index_on_y_gives_the_same_distances_and_gradients():
+    from nurbskit.core.neighbors import NeighborIndex
+
+    x = _rand(40, 3, seed=21).requires_grad_(True)
+    y = _rand(25, 3, seed=22).requires_grad_(True)
+    index = NeighborIndex(y)
+    for fn in (L.chamfer_distance, L.hausdorff_distance):
+        want = fn(x, y)
+        g_want = torch.autograd.grad(want, (x, y))
+        for _ in range(2):  # the index is reused
+            got = fn(x, y, y_index=index)
+            assert got.item() == want.item()
+            for a, b in zip(torch.autograd.grad(got, (x, y)), g_want):
+                assert torch.equal(a, b)
+    with pytest.raises(NurbskitError, match="built on y itself"):
+        L.chamfer_distance(x, y[:20], y_index=index)
+    with pytest.raises(NurbskitError, match="built on y itself"):
+        L.chamfer_distance(x, y.detach().clone(), y_index=index)
+    with pytest.raises(NurbskitError, match=r"x one \(N, D\) cloud"):
+        L.chamfer_distance(x[None], y, y_index=index)
+
+
 def test_chamfer_errors():
     with pytest.raises(NurbskitError, match="at least one point"):
         L.chamfer_distance(torch.rand(0, 3), torch.rand(4, 3))

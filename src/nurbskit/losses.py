@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from .errors import NurbskitError
-from .core.neighbors import nearest_neighbors
+from .core.neighbors import NeighborIndex, nearest_neighbors
 
 Tensor = torch.Tensor
 
@@ -67,9 +67,19 @@ def _gathered_sq_dist(query: Tensor, reference: Tensor, index: Tensor) -> Tensor
     return ((query - nearest) ** 2).sum(-1)
 
 
-def _directed_sq_dists(x: Tensor, y: Tensor) -> tuple[Tensor, Tensor]:
+def _directed_sq_dists(x: Tensor, y: Tensor, y_index: NeighborIndex | None = None) -> tuple[Tensor, Tensor]:
     _check_cloud("x", x)
     _check_cloud("y", y)
+    if y_index is not None:
+        ref = y_index.reference  # y detached: the same storage
+        if x.ndim != 2 or ref.shape != y.shape or ref.data_ptr() != y.data_ptr():
+            raise NurbskitError(
+                f"y_index must be a NeighborIndex built on y itself, and x one (N, D) cloud; got x "
+                f"{tuple(x.shape)}, y {tuple(y.shape)}, an index on {tuple(y_index.reference.shape)}"
+            )
+        ix = y_index.indices(x)
+        _, iy = nearest_neighbors(y, x)
+        return _gathered_sq_dist(x, y, ix), _gathered_sq_dist(y, x, iy)
     if x.shape[-2] == 0 or y.shape[-2] == 0:
         raise NurbskitError(
             f"both point clouds need at least one point; got x {tuple(x.shape)} and y {tuple(y.shape)}"
@@ -137,6 +147,7 @@ def chamfer_distance(
     y: Tensor,
     reduction: str = "mean",
     return_parts: bool = False,
+    y_index: NeighborIndex | None = None,
 ) -> Tensor | tuple[Tensor, Tensor, Tensor]:
     """Symmetric Chamfer distance of squared nearest distances (thesis eq. 2.7).
 
@@ -145,7 +156,10 @@ def chamfer_distance(
 
     Shapes: ``x (*, N, D)``, ``y (*, M, D)`` with batch shapes that broadcast (one cloud
     against a batch of clouds); N and M may differ -> ``(*)``. With ``return_parts=True`` returns ``(total, x_to_y, y_to_x)``,
-    each ``(*)``.
+    each ``(*)``. ``y_index``: a :class:`~nurbskit.core.neighbors.NeighborIndex` built on
+    ``y`` (one ``(M, D)`` cloud, against one ``(N, D)`` cloud ``x``), for a ``y`` that stays
+    fixed over many calls (a fitting target): its KD-tree is built once, not per call;
+    the result is the same.
 
     Convention: nearest neighbours are found without gradient (KD-tree on CPU, chunked
     cdist on CUDA) and the squared distances recomputed by gathering, so the gradient
@@ -162,7 +176,7 @@ def chamfer_distance(
         tensor(2.1667)
     """
     _check_reduction(reduction, ("mean", "sum"))
-    dx, dy = _directed_sq_dists(x, y)
+    dx, dy = _directed_sq_dists(x, y, y_index)
     px, py = _reduce(dx, reduction, -1), _reduce(dy, reduction, -1)
     total = px + py
     return (total, px, py) if return_parts else total
@@ -195,13 +209,15 @@ def hausdorff_distance(
     y: Tensor,
     squared: bool = False,
     return_parts: bool = False,
+    y_index: NeighborIndex | None = None,
 ) -> Tensor | tuple[Tensor, Tensor, Tensor]:
     """Symmetric Hausdorff distance (thesis eq. 2.8), not squared by default.
 
     ``HD(X, Y) = max(max_x min_y ||x - y||, max_y min_x ||x - y||)``.
 
     Shapes: ``x (*, N, D)``, ``y (*, M, D)`` -> ``(*)``. With ``return_parts=True``
-    returns ``(total, x_to_y, y_to_x)`` with the two directed distances.
+    returns ``(total, x_to_y, y_to_x)`` with the two directed distances. ``y_index`` as
+    for :func:`chamfer_distance`.
 
     Convention: the thesis uses the Euclidean distance (``squared=False``); with
     ``squared=True`` every value is the square of that. The gradient reaches the
@@ -215,7 +231,7 @@ def hausdorff_distance(
         >>> hausdorff_distance(x, y)
         tensor(2.)
     """
-    dx, dy = _directed_sq_dists(x, y)
+    dx, dy = _directed_sq_dists(x, y, y_index)
     hx, hy = dx.amax(-1), dy.amax(-1)
     if not squared:
         hx, hy = _safe_sqrt(hx), _safe_sqrt(hy)

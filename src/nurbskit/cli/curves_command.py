@@ -59,6 +59,8 @@ def register(subparsers) -> None:
     p.add_argument("--refine-iters", type=int_in(1, 1000), default=20, metavar="N",
                    help="L-BFGS iterations of --refine (default 20)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (shown on stderr for stages that last over a second)")
     p.set_defaults(run=run_curves)
 
 
@@ -141,12 +143,18 @@ def run_curves(args) -> int:
     from .._fs import atomic_open, check_output_dir, output_directory
     from ..curves.api import COORDINATES, extract, read_image
     from ..curves.classic import chamfer_to_ink
+    from ._progress import StageBars
 
     check_output_dir(args.out, args.overwrite, inputs=[args.image])
     start = time.perf_counter()
     grey = read_image(args.image)
-    curves, strokes = extract(grey, method=args.method, mode=args.mode, tolerance=args.tolerance,
-                              refine=args.refine, refine_iterations=args.refine_iters, source=str(args.image))
+    bars = StageBars(args.quiet, delay=1.0)  # a large drawing's stages; quick ones print nothing
+    try:
+        curves, strokes = extract(grey, method=args.method, mode=args.mode, tolerance=args.tolerance,
+                                  refine=args.refine, refine_iterations=args.refine_iters, source=str(args.image),
+                                  progress=bars)
+    finally:
+        bars.close()
     seconds = time.perf_counter() - start
     # No curve (a dot, a filled blob: no stroke longer than its width): no distances (null).
     chamfer = chamfer_to_ink(curves, strokes.ink) if curves else {k: None for k in
@@ -171,11 +179,17 @@ def run_curves(args) -> int:
         "files": ["curves.json", "curves.svg", "overlay.png", "report.json"],
     }
     with output_directory(args.out, args.overwrite, inputs=[args.image]) as tmp:
-        write_curves_json(tmp / "curves.json", curves, (w, h))
-        write_svg(tmp / "curves.svg", grey, curves)
-        write_overlay(tmp / "overlay.png", grey, curves)
-        with atomic_open(tmp / "report.json", "w") as fh:
-            json.dump(report, fh, indent=2)
+        try:
+            bars("writing", 0, 3)
+            write_curves_json(tmp / "curves.json", curves, (w, h))
+            bars("writing", 1, 3)
+            write_svg(tmp / "curves.svg", grey, curves)
+            bars("writing", 2, 3)
+            write_overlay(tmp / "overlay.png", grey, curves)
+            with atomic_open(tmp / "report.json", "w") as fh:
+                json.dump(report, fh, indent=2)
+        finally:
+            bars.close()
     if not curves:
         why = (f"no stroke longer than its width ({strokes.width:.1f} px) in the ink" if strokes.width is not None
                else "the network found none")

@@ -16,7 +16,6 @@ temporary name). Labels in the input (``.xyzc``) are the ground truth of the IoU
 from __future__ import annotations
 
 import dataclasses
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -93,31 +92,6 @@ def load_cloud(path: str | Path, sample: int | None, seed: int):
     return cloud.points, cloud.normals, cloud.labels
 
 
-class _Bars:
-    """One tqdm bar per stage, on stderr."""
-
-    def __init__(self, quiet: bool):
-        self.quiet, self.stage, self.bar = quiet, None, None
-
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        if self.quiet:
-            return
-        from tqdm import tqdm
-
-        if stage != self.stage:
-            self.close()
-            self.stage = stage
-            self.bar = tqdm(total=max(total, 1), desc=stage, file=sys.stderr, leave=False)
-        self.bar.total = max(total, 1)
-        self.bar.n = min(done, self.bar.total)
-        self.bar.refresh()
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
-
-
 def run_patches(args) -> int:
     from .._fs import check_output_dir, output_directory
     from ..patches import fit_patches
@@ -146,7 +120,9 @@ def run_patches(args) -> int:
         if not vg.is_file():
             raise OptionError(f"--init: expected 'auto' or an existing .vg file, got {args.init!r}")
         _, init_labels = read_vg(vg, n_points=len(points))
-    bars = _Bars(args.quiet)
+    from ._progress import StageBars
+
+    bars = StageBars(args.quiet)
     try:
         result = fit_patches(points, normals, cfg, init_labels=init_labels, truth=labels, progress=bars)
     finally:

@@ -20,6 +20,19 @@ COORDINATES = ("pixels: x to the right, y down, origin at the top-left corner of
                "the centre of pixel [row, col] is (col + 0.5, row + 0.5)")
 
 
+#: Peak memory of reading one drawing, per pixel: an upper bound of what was measured
+#: (seventeenth session, peak resident size less the interpreter's and torch's: 45 bytes
+#: at 2048 x 2048, 88 with ``--refine`` on a 4096 x 4096 maze of 3,656 curves).
+BYTES_PER_PIXEL = 96
+
+
+def check_fits(source, height: int, width: int) -> None:
+    """Refuse (InputError naming ``source``) an image whose reading would not fit in memory."""
+    from ..io._base import check_fits as fits
+
+    fits(source, BYTES_PER_PIXEL * height * width, f"reading curves from a {width} x {height} image")
+
+
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """An image file -> ``(H, W)`` float64 grey in [0, 1] (PIL; its decompression-bomb limit applies).
 
@@ -36,6 +49,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             with Image.open(path) as im:
+                check_fits(path, im.height, im.width)  # before the pixels are decoded
                 im.load()
                 if im.width == 0 or im.height == 0:
                     raise InputError(f"{path}: the image is empty ({im.width} x {im.height} pixels)")
@@ -53,11 +67,14 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
 
 
 def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", tolerance: float = 1.0,
-            refine: bool = False, refine_iterations: int = 20, source: str = "image"):
+            refine: bool = False, refine_iterations: int = 20, source: str = "image", progress=None):
     """Curves in a grey image ``(H, W)`` and what was found on the way -> ``(curves, Extraction)``.
 
     The one place that dispatches on ``method`` (:func:`curves_from_image` and
-    ``nurbskit curves`` both call it):
+    ``nurbskit curves`` both call it). ``progress``: None, or called as ``progress(stage,
+    done, total)`` by the classical path's stages (``fit_image``, ``refine``). An image
+    whose reading would not fit in memory (``BYTES_PER_PIXEL``) is refused first.
+    Methods:
 
     * ``"hybrid"`` (the default): the classical path with the MV network's vote on the
       number of curves as evidence. The vote: :func:`nurbskit.curves.nets.predict.count_probabilities`
@@ -97,6 +114,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
       count, open and closed strokes), the refined network where strokes cross and the
       skeleton's junction pairing guesses wrong (see ``benchmarks/results/curves_nets.md``).
     """
+    from functools import partial
+
     from .classic import Strokes, chamfer_to_ink, even_background, fit_image, ink_mask
 
     if method not in METHODS:
@@ -105,12 +124,15 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
+    check_fits(source, *grey.shape[:2])
     iterations = refine_iterations if refine else 0
+    classic_path = partial(fit_image, grey, tolerance=tolerance, refine_iterations=iterations, source=source,
+                           progress=progress)
     if method == "classic":
-        curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+        curves, strokes = classic_path()
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     if method == "hybrid":
-        return _hybrid(grey, tolerance, iterations, refine_iterations, source)
+        return _hybrid(classic_path, grey, tolerance, refine_iterations, progress)
     from .nets.predict import network_curves, refined_curves
 
     grey = even_background(grey)  # as fit_image does for the classical path (a photographed drawing)
@@ -121,7 +143,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         else:
             curves = network_curves(grey, mode, inverted)
         return curves, Extraction(ink, inverted, None, "network", None)
-    classic, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+    classic, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
+                                 progress=progress)
     net = refined_curves(grey, ink, "MV", inverted, refine_iterations)
     score = [chamfer_to_ink(c, ink)["symmetric"] if c else float("inf") for c in (classic, net)]
     if score[1] < score[0]:
@@ -164,19 +187,18 @@ def thin_enough(width: float, ink: np.ndarray) -> bool:
     return width <= HYBRID_MAX_WIDTH * extent
 
 
-def _hybrid(grey, tolerance, iterations, refine_iterations, source):
+def _hybrid(classic_path, grey, tolerance, refine_iterations, progress):
     """The classical path with the MV network's count vote (see :func:`extract`); without the
-    shipped ``curves_mv_redrawn`` weights, the classical path alone."""
-    from .classic import _PRIOR_COUNTS, fit_image
-    from .classic import refine as refine_curves
-    from .classic import refine_counts, regrouped
+    shipped ``curves_mv_redrawn`` weights, the classical path alone. ``classic_path(**options)``:
+    :func:`~nurbskit.curves.classic.fit_image` on the drawing with the call's options."""
+    from .classic import _PRIOR_COUNTS, refine, refine_counts, regrouped
     from .nets.models import MAX_POINTS, MIN_POINTS
     from .nets.predict import count_probabilities, curves_of_count, load_model, redrawn
 
     try:
         load_model("MV", "redrawn")
     except InputError:  # no shipped weights (a stripped install): the classical path alone
-        curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+        curves, strokes = classic_path()
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     vote = {}
 
@@ -190,14 +212,13 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
             return None
         return read_vote(skeleton)
 
-    curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
-                                count_prior=prior)
+    curves, strokes = classic_path(count_prior=prior)
     found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     if vote.get("thick") or not thin_enough(strokes.width, strokes.ink):
         # Outside what the networks know: the classical reading alone. The width is known
         # before the vote where the search runs, and then the vote is not read at all.
         if "p" in vote:  # the search ran with the vote: run it again without
-            curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source)
+            curves, strokes = classic_path()
             found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
         return curves, found
     if not 1 <= len(curves) <= _PRIOR_COUNTS:
@@ -215,8 +236,8 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
         k = int(np.argmax(log_p[:3])) + 1
         if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_LARGE:
             return curves, found
-        curves, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
-                                    count_prior=lambda skeleton, width, ink: vote["p"], search_extent=float("inf"))
+        curves, strokes = classic_path(count_prior=lambda skeleton, width, ink: vote["p"],
+                                       search_extent=float("inf"))
         found = Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
         if not 1 <= len(curves) <= _PRIOR_COUNTS:
             return curves, found
@@ -225,11 +246,11 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     if k == len(curves) or log_p[k - 1] - log_p[len(curves) - 1] <= HYBRID_SWITCH:
         return curves, found
     start = curves_of_count(redrawn(vote["skeleton"]), k, grey.shape)
-    start = (_coarse_refined if large else refine_curves)(start, strokes.ink, refine_iterations)
+    start = (_coarse_refined if large else refine)(start, strokes.ink, refine_iterations, progress=progress)
     joined = regrouped(curves, start, tolerance)
     if joined is not None:  # the classical pieces, grouped as the network's curves group them
         found.chosen = "regrouped"
-        return refine_curves(joined, strokes.ink, refine_iterations), found
+        return refine(joined, strokes.ink, refine_iterations, progress=progress), found
     if large:
         # The network's own curves, refined from their coarse start, lie pixels from the
         # true curves at this size (3.5 to 3.8 px on the development drawings at 512 px) and
@@ -239,7 +260,7 @@ def _hybrid(grey, tolerance, iterations, refine_iterations, source):
     return refine_counts(start, strokes.ink, refine_iterations, MIN_POINTS, MAX_POINTS), found
 
 
-def _coarse_refined(curves: list, ink: np.ndarray, iterations: int) -> list:
+def _coarse_refined(curves: list, ink: np.ndarray, iterations: int, progress=None) -> list:
     """``curves`` refined (``classic.refine``) against ``ink`` reduced by an integer factor
     to at most ``GUIDE_EXTENT`` px across (a block is ink where any of its pixels is), in
     the full drawing's pixel coordinates: guides good to about the factor in pixels, at
@@ -251,13 +272,13 @@ def _coarse_refined(curves: list, ink: np.ndarray, iterations: int) -> list:
 
     factor = -(-max(ink.shape) // GUIDE_EXTENT)
     if factor == 1:
-        return refine(curves, ink, iterations)
+        return refine(curves, ink, iterations, progress=progress)
 
     def scaled(cs, by):  # the origin is a pixel corner, so a block's corner maps to its pixel's
         return [NURBSCurve(c.control_points * by, degree=c.degree, knot_vector=c.knot_vector) for c in cs]
 
     small = block_reduce(ink, (factor, factor), np.max)
-    return scaled(refine(scaled(curves, 1.0 / factor), small, iterations), float(factor))
+    return scaled(refine(scaled(curves, 1.0 / factor), small, iterations, progress=progress), float(factor))
 
 
 class Extraction:

@@ -1337,7 +1337,7 @@ def _ink_points(ink: np.ndarray) -> np.ndarray:
     return np.stack([cols + 0.5, rows + 0.5], axis=1).astype(np.float64)
 
 
-def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float = 0.5) -> list:
+def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float = 0.5, progress=None) -> list:
     """Control points of every curve moved by L-BFGS to lower the Chamfer distance to the ink.
 
     The loss is ``nurbskit.losses.chamfer_distance`` between all curves' samples (about
@@ -1345,34 +1345,69 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
     loop's L-BFGS (:meth:`nurbskit.fit.optim.LBFGS.run`: ``torch.optim.LBFGS``'s
     iterations, strong Wolfe search, its defaults; not a ``torch.optim.Optimizer``, so no
     ``torch._dynamo`` import).
+
+    The samples are linear in the control points of these polynomial curves: one sparse
+    product ``S @ P`` for all curves per step (:func:`_sample_matrix`, built once), and
+    the ink's KD-tree is built once too (``y_index``). Seventeenth session, one thread:
+    20 iterations on 30 drawings of 1-3 curves 34 -> 24 ms at 128 px, 83 -> 63 ms at 512
+    px, and on a 1024 px maze of 753 curves 16.7 -> 9.4 s, against a core evaluation per
+    curve and a tree per step (the same Chamfer to the ink to 1e-4 px; L-BFGS's path
+    differs by rounding). ``progress``: None, or called as ``progress("refining", loss
+    evaluations, their most)``.
     """
     import torch
 
     from ..core import NURBSCurve
+    from ..core.neighbors import NeighborIndex
+    from ..errors import NurbskitError
     from ..fit.optim import LBFGS
     from ..losses import chamfer_distance
 
     if not curves:
         return curves
+    if any(not bool((c.weights == 1).all()) for c in curves):
+        raise NurbskitError("refine: the curves must be polynomial (all weights 1)")
     target = torch.as_tensor(_ink_points(ink))
+    index = NeighborIndex(target)  # the ink's KD-tree, built once for all steps
     params = [c.control_points.detach().contiguous().clone().requires_grad_(True) for c in curves]
-    counts = []
-    for c in curves:
-        cp = c.control_points.detach().numpy()
-        counts.append(int(np.clip(np.linalg.norm(np.diff(cp, axis=0), axis=1).sum() / spacing, 16, 4096)))
-    us = [torch.linspace(0, 1, m, dtype=torch.float64) for m in counts]
+    basis = _sample_matrix(curves, spacing)
     opt = LBFGS(params, lr=1.0, history_size=100)
+    report = progress or (lambda stage, done, total: None)
+    most = iterations * 5 // 4  # L-BFGS's most evaluations (torch's default max_eval)
+    evaluations = iter(range(1, most + 1))
 
     def closure():
+        report("refining", next(evaluations, most), most)
         opt.zero_grad()
-        samples = torch.cat([NURBSCurve(p, degree=c.degree, knot_vector=c.knot_vector, validate=False).evaluate(u)
-                             for p, c, u in zip(params, curves, us)])
-        loss = chamfer_distance(samples, target)
+        loss = chamfer_distance(torch.sparse.mm(basis, torch.cat(params)), target, y_index=index)
         loss.backward()
         return loss
 
     opt.run(closure, max_iter=iterations)
     return [NURBSCurve(p.detach(), degree=c.degree, knot_vector=c.knot_vector) for p, c in zip(params, curves)]
+
+
+def _sample_matrix(curves: list, spacing: float):
+    """The sparse ``(samples, control points)`` matrix ``S`` of polynomial ``curves``: ``S @
+    cat(control points)`` are their samples, about ``spacing`` px apart along each control
+    polygon (16 to 4,096 per curve), at parameters uniform over ``[0, 1]``, curve after
+    curve; block-diagonal, ``degree + 1`` nonzero basis values per row (:func:`_local_basis`)."""
+    import torch
+
+    rows, cols, vals = [], [], []
+    n_samples = n_ctrl = 0
+    for c in curves:
+        cp = c.control_points.detach().numpy()
+        m = int(np.clip(np.linalg.norm(np.diff(cp, axis=0), axis=1).sum() / spacing, 16, 4096))
+        u = torch.linspace(0, 1, m, dtype=torch.float64)
+        values, first = _local_basis(c.knot_vector.detach().numpy(), c.degree, u, 0)
+        rows.append(np.repeat(np.arange(n_samples, n_samples + m), c.degree + 1))
+        cols.append((n_ctrl + first[:, None] + np.arange(c.degree + 1)).ravel())
+        vals.append(values[:, 0].ravel())
+        n_samples, n_ctrl = n_samples + m, n_ctrl + len(cp)
+    at = torch.from_numpy(np.stack([np.concatenate(rows), np.concatenate(cols)]))
+    return torch.sparse_coo_tensor(at, torch.from_numpy(np.concatenate(vals)), (n_samples, n_ctrl),
+                                   check_invariants=True).coalesce()
 
 
 def resampled(curve, n_ctrl: int, samples_per_point: int = 16):
@@ -1509,7 +1544,8 @@ def chamfer_points(a: np.ndarray, b: np.ndarray) -> dict:
 
 
 def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source: str = "image",
-              min_length: float | None = None, count_prior=None, search_extent: float | None = None):
+              min_length: float | None = None, count_prior=None, search_extent: float | None = None,
+              progress=None):
     """Curves in a drawing by the classical path -> ``(curves, Strokes)``.
 
     Args:
@@ -1523,9 +1559,13 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
             evidence when choosing junction pairings (see :func:`trace_strokes`).
         search_extent: the pairing search runs on drawings whose ink spans at most this
             many pixels (default: 256, see :func:`trace_strokes`).
+        progress: None, or called as ``progress(stage, done, total)`` ("tracing strokes",
+            "fitting strokes", then :func:`refine`'s "refining").
     """
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
+    report = progress or (lambda stage, done, total: None)
+    report("tracing strokes", 0, 1)
     grey = even_background(to_grey(image, source))
     ink, inverted = ink_mask(grey, source)
     strokes, width = trace_strokes(ink, tolerance=tolerance, count_prior=count_prior, search_extent=search_extent)
@@ -1540,7 +1580,8 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         if longest >= 2.0 * width + 4.0:  # still a stroke, not a dot
             min_length = min(min_length, 0.5 * longest)
     curves = []
-    for s in strokes:
+    for i, s in enumerate(strokes):
+        report("fitting strokes", i, len(strokes))
         if np.linalg.norm(np.diff(s, axis=0), axis=1).sum() < min_length:
             continue
         if len(s) < 4:  # too few points for a cubic: resample the short segment
@@ -1558,5 +1599,5 @@ def fit_image(image, tolerance: float = 1.0, refine_iterations: int = 0, source:
         curve, _ = fit_stroke(s, tolerance, measure=False)
         curves.append(curve)
     if refine_iterations:
-        curves = refine(curves, ink, refine_iterations)
+        curves = refine(curves, ink, refine_iterations, progress=progress)
     return curves, Strokes(strokes=strokes, ink=ink, width=width, inverted=inverted)

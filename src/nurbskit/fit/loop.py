@@ -144,10 +144,15 @@ def stage_loss(
                 )
             ordered = x[: flat.shape[0]]  # thesis UB: points in file order
         parts["l2"] = L.l2_loss(flat, ordered)
+    if (w.chamfer or w.hausdorff or w.coverage) and state.index is None:
+        state.index = NeighborIndex(x)  # the input's KD-tree, built once per stage
+    # Chamfer and Hausdorff are symmetric: (samples, input) with the input's index is the
+    # same loss as (input, samples) (its gradient summed in another order: 1e-16 apart
+    # after 30 iterations of UC, UCDH and default on 2,000 points).
     if w.chamfer:
-        parts["chamfer"] = L.chamfer_distance(x, flat)
+        parts["chamfer"] = L.chamfer_distance(flat, x, y_index=state.index)
     if w.hausdorff:
-        parts["hausdorff"] = L.hausdorff_distance(x, flat)
+        parts["hausdorff"] = L.hausdorff_distance(flat, x, y_index=state.index)
     if w.laplacian:
         if target.supervised:
             if target.control_points is not None and target.control_points.shape == surface.control_points.shape:
@@ -164,8 +169,6 @@ def stage_loss(
         closest = surface.evaluate(state.foot)
         parts["point_to_surface"] = (closest - x).square().sum(-1).mean()
     if w.coverage:
-        if state.index is None:
-            state.index = NeighborIndex(x)
         # a non-finite surface searches with zeros; its loss is non-finite all the same
         idx = state.index.indices(torch.nan_to_num(flat.detach(), 0.0, 0.0, 0.0))
         parts["coverage"] = (flat - x.index_select(0, idx)).square().sum(-1).mean()
