@@ -283,7 +283,7 @@ def test_guides_refined_on_the_reduced_ink_land_on_the_full_size_strokes():
 
 def test_the_refinements_sample_matrix_evaluates_every_curve():
     # S @ cat(P) must be each curve's points at uniform parameters, curve after curve:
-    # the core's evaluation is the oracle (uneven knots, degrees 1 to 3).
+    # the core's evaluation is the oracle (uneven knots, degrees 1 to 3, a domain [2, 5]).
     import torch
 
     from nurbskit.core import NURBSCurve
@@ -291,9 +291,9 @@ def test_the_refinements_sample_matrix_evaluates_every_curve():
 
     rng = np.random.default_rng(3)
     curves = []
-    for degree, n in ((3, 9), (1, 4), (2, 6), (3, 4)):
+    for degree, n, (lo, hi) in ((3, 9, (0, 1)), (1, 4, (0, 1)), (2, 6, (2, 5)), (3, 4, (0, 1))):
         interior = np.sort(rng.uniform(0.1, 0.9, n - degree - 1))
-        knots = np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
+        knots = lo + (hi - lo) * np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
         curves.append(NURBSCurve(torch.from_numpy(rng.uniform(0, 100, (n, 2))), degree=degree,
                                  knot_vector=torch.from_numpy(knots)))
     S = _sample_matrix(curves, 0.5)
@@ -301,7 +301,8 @@ def test_the_refinements_sample_matrix_evaluates_every_curve():
     want, start = [], 0
     for c in curves:
         m = int(np.clip(np.linalg.norm(np.diff(c.control_points.numpy(), axis=0), axis=1).sum() / 0.5, 16, 4096))
-        want.append(c.evaluate(torch.linspace(0, 1, m, dtype=torch.float64)))
+        lo, hi = c.domain[0]
+        want.append(c.evaluate(torch.linspace(lo, hi, m, dtype=torch.float64)))
     want = torch.cat(want)
     assert got.shape == want.shape and S.shape[1] == sum(len(c.control_points) for c in curves)
     assert float((got - want).abs().max()) < 1e-11

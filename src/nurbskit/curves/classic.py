@@ -1390,8 +1390,9 @@ def refine(curves: list, ink: np.ndarray, iterations: int = 20, spacing: float =
 def _sample_matrix(curves: list, spacing: float):
     """The sparse ``(samples, control points)`` matrix ``S`` of polynomial ``curves``: ``S @
     cat(control points)`` are their samples, about ``spacing`` px apart along each control
-    polygon (16 to 4,096 per curve), at parameters uniform over ``[0, 1]``, curve after
-    curve; block-diagonal, ``degree + 1`` nonzero basis values per row (:func:`_local_basis`)."""
+    polygon (16 to 4,096 per curve), at parameters uniform over each curve's domain, curve
+    after curve; block-diagonal, ``degree + 1`` nonzero basis values per row
+    (:func:`_local_basis`)."""
     import torch
 
     rows, cols, vals = [], [], []
@@ -1399,7 +1400,8 @@ def _sample_matrix(curves: list, spacing: float):
     for c in curves:
         cp = c.control_points.detach().numpy()
         m = int(np.clip(np.linalg.norm(np.diff(cp, axis=0), axis=1).sum() / spacing, 16, 4096))
-        u = torch.linspace(0, 1, m, dtype=torch.float64)
+        lo, hi = c.domain[0]
+        u = torch.linspace(lo, hi, m, dtype=torch.float64)
         values, first = _local_basis(c.knot_vector.detach().numpy(), c.degree, u, 0)
         rows.append(np.repeat(np.arange(n_samples, n_samples + m), c.degree + 1))
         cols.append((n_ctrl + first[:, None] + np.arange(c.degree + 1)).ravel())
