@@ -70,6 +70,10 @@ def _gathered_sq_dist(query: Tensor, reference: Tensor, index: Tensor) -> Tensor
 def _directed_sq_dists(x: Tensor, y: Tensor, y_index: NeighborIndex | None = None) -> tuple[Tensor, Tensor]:
     _check_cloud("x", x)
     _check_cloud("y", y)
+    if x.shape[-2] == 0 or y.shape[-2] == 0:
+        raise NurbskitError(
+            f"both point clouds need at least one point; got x {tuple(x.shape)} and y {tuple(y.shape)}"
+        )
     if y_index is not None:
         ref = y_index.reference  # y detached: the same storage
         if x.ndim != 2 or ref.shape != y.shape or ref.data_ptr() != y.data_ptr():
@@ -80,10 +84,6 @@ def _directed_sq_dists(x: Tensor, y: Tensor, y_index: NeighborIndex | None = Non
         ix = y_index.indices(x)
         _, iy = nearest_neighbors(y, x)
         return _gathered_sq_dist(x, y, ix), _gathered_sq_dist(y, x, iy)
-    if x.shape[-2] == 0 or y.shape[-2] == 0:
-        raise NurbskitError(
-            f"both point clouds need at least one point; got x {tuple(x.shape)} and y {tuple(y.shape)}"
-        )
     try:
         batch = np.broadcast_shapes(x.shape[:-2], y.shape[:-2])  # torch's imports sympy (0.3 s)
     except ValueError:

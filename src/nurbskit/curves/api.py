@@ -57,6 +57,8 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
                     array = np.asarray(im.convert("RGBA"))
                 else:
                     array = np.asarray(im.convert("L"))
+    except InputError:  # ours (the memory check, an empty image): already one line naming the file
+        raise
     except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
         raise InputError(f"{path}: the image is too large to read safely ({exc})") from None
     except UnidentifiedImageError:
