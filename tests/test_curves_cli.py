@@ -102,13 +102,13 @@ def test_curves_an_image_that_would_not_fit_in_memory_is_refused(tmp_path, capsy
     import nurbskit.io._base as base
 
     src = _write(tmp_path / "big.png", np.ones((64, 64)))
-    monkeypatch.setattr(base, "available_memory", lambda: 100_000)  # 64 x 64 x 96 bytes = 393,216
+    monkeypatch.setattr(base, "available_memory", lambda: 100_000)  # 64 x 64 x 128 bytes = 524,288
     assert main(["curves", str(src), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == (f"nurbskit curves: error: {src}: reading curves from a 64 x 64 image needs about 384.0 KB "
+    assert err == (f"nurbskit curves: error: {src}: reading curves from a 64 x 64 image needs about 512.0 KB "
                    "of memory but only 97.7 KB is available")
     assert not (tmp_path / "o").exists()
-    with pytest.raises(InputError, match="64 x 64 image needs about 384.0 KB"):  # the API, an array
+    with pytest.raises(InputError, match="64 x 64 image needs about 512.0 KB"):  # the API, an array
         import nurbskit
 
         nurbskit.curves_from_image(np.ones((64, 64)))

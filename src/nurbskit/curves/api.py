@@ -22,8 +22,8 @@ COORDINATES = ("pixels: x to the right, y down, origin at the top-left corner of
 
 #: Peak memory of reading one drawing, per pixel: an upper bound of what was measured
 #: (seventeenth session, peak resident size less the interpreter's and torch's: 45 bytes
-#: at 2048 x 2048, 88 with ``--refine`` on a 4096 x 4096 maze of 3,656 curves).
-BYTES_PER_PIXEL = 96
+#: at 2048 x 2048, 110 with ``--refine`` on a 4096 x 4096 maze of 3,656 curves).
+BYTES_PER_PIXEL = 128
 
 
 def check_fits(source, height: int, width: int) -> None:
