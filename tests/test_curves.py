@@ -119,7 +119,6 @@ def test_fit_stroke_follows_a_long_wavy_stroke():
     assert 40 <= curve.control_points.shape[0] <= 200
 
 
-
 def test_fit_stroke_puts_its_knots_where_the_stroke_bends():
     # 1,000 px straight, then 100 px of tight waves: the waves need knots, the line none.
     x = np.arange(0.0, 1100.0, 0.5)
@@ -298,7 +297,7 @@ def test_the_refinements_sample_matrix_evaluates_every_curve():
                                  knot_vector=torch.from_numpy(knots)))
     S = _sample_matrix(curves, 0.5)
     got = torch.sparse.mm(S, torch.cat([c.control_points for c in curves]))
-    want, start = [], 0
+    want = []
     for c in curves:
         m = int(np.clip(np.linalg.norm(np.diff(c.control_points.numpy(), axis=0), axis=1).sum() / 0.5, 16, 4096))
         lo, hi = c.domain[0]
