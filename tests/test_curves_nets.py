@@ -64,6 +64,27 @@ def test_batch_render_equals_the_reference_render():
     assert_close(1.0 - alone[0].numpy(), batch.image[0].double().numpy(), atol=1e-6, rtol=0)
 
 
+@pytest.mark.parametrize("chunk", [7, 4096])
+def test_batch_render_equals_a_brute_force_render(monkeypatch, chunk):
+    """Every pixel of every image: the largest clip(width / 2 + 1/2 - d, 0, 1) over that image's
+    samples, found by brute force; samples off the image (some near its edge, some far) and
+    chunks of samples that split an image change nothing."""
+    from nurbskit.curves import synthetic
+
+    monkeypatch.setattr(synthetic, "RENDER_CHUNK", chunk)
+    g = np.random.default_rng(4)
+    h, w, images = 18, 23, 3
+    pts = g.uniform([-9.0, -9.0], [w + 9.0, h + 9.0], size=(400, 2))
+    owner = g.integers(0, images, 400)
+    cy, cx = np.mgrid[0:h, 0:w] + 0.5
+    for width in (1.0, 2.0, 3.5):
+        got = render_batch(torch.as_tensor(pts), torch.as_tensor(owner), images, (h, w), width).numpy()
+        for b in range(images):
+            p = pts[owner == b]
+            d = np.hypot(cx[..., None] - p[:, 0], cy[..., None] - p[:, 1])
+            assert_close(got[b], np.clip(width / 2 + 0.5 - d, 0.0, 1.0).max(-1), atol=1e-12, rtol=0)
+
+
 def test_batch_curves_lie_where_their_control_points_say():
     batch = make_torch_batch(_gen(11), 3, mode_config("MV", 128))  # strokes 2 px wide
     for s in batch.samples():
