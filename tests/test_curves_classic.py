@@ -89,6 +89,8 @@ def test_a_stroke_ending_on_another_at_an_acute_angle_is_not_a_hairpin():
     drawings = {
         "lambda": [_segments([30, 10], [100, 118]), _segments([65, 64], [30, 118])],
         "y": [_segments([30, 10], [64, 64]), _segments([98, 10], [30, 118])],
+        # A "Y": neither arm continues the stem; both turn away from it (32 degrees).
+        "Y": [_segments([30, 10], [64, 64], [98, 10]), _segments([64, 64], [64, 118])],
     }
     for name, strokes in drawings.items():
         for width in (1.0, 2.0, 3.0):

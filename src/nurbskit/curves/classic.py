@@ -335,6 +335,10 @@ _OPPOSITE = -0.2
 # branch measured 11 to 17 px at 128 px (reach 4), the letters of the tests 53 px and more.
 _RUNS_ON = 20.0
 _LEAVES = 50.0
+# ... nor where both branches turn away from such a stem by more than _SPREAD degrees (a
+# "Y": a stroke ending where two others meet; a hairpin's two sides leave its merged stem
+# nearly straight, one of them within a few degrees).
+_SPREAD = 25.0
 _LONG_STEM = 5.0
 # ... and the ink along the stem one stroke wide: at most this many stroke widths (the
 # two sides of a long hairpin merge into ink up to twice as wide, and the skeleton runs
@@ -411,8 +415,9 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0, one_stroke=None) -> t
       shape (two curves touching near-tangentially over a stretch), and the copies
       continue into the branches there, each into the one that turns least. No
       hairpin where the dead-end stem runs straight on into one branch (within
-      ``_RUNS_ON`` degrees) while the other leaves at more than ``_LEAVES``, and the
-      stem is longer than ``_LONG_STEM * reach`` pixels and its ink one stroke wide
+      ``_RUNS_ON`` degrees) while the other leaves at more than ``_LEAVES``, or both
+      turn away from it by more than ``_SPREAD`` (a "Y"), and the stem is longer
+      than ``_LONG_STEM * reach`` pixels and its ink one stroke wide
       (``one_stroke(path)``, when given, with ``_ONE_STROKE``): the medial line of two
       merged sides runs between them, and two sides stay merged only over a short
       stretch near the tip or make a wider stroke, so this is one stroke with another
@@ -451,12 +456,14 @@ def _pair_ends(edges: list, reach: int, stub: float = 0.0, one_stroke=None) -> t
         return direction(end, reach // 2, 2 * reach)
 
     def runs_on(stem, f, g):
-        """True where a long dead-end ``stem`` runs straight on into ``f`` or ``g`` and the other leaves it."""
+        """True where a long one-stroke dead-end ``stem`` is a stroke ending on ``f`` and ``g``: it runs
+        straight on into one of them and the other leaves it (a "y"), or both turn away from it (a "Y")."""
         o, path = other(stem), edges[stem[0]][2]
         if o < 0 or len(at.get(o, [])) != 1 or len(path) <= _LONG_STEM * reach:
             return False
         turns = sorted(float(np.degrees(np.arccos(np.clip(-distant(stem) @ distant(e), -1.0, 1.0)))) for e in (f, g))
-        return turns[0] < _RUNS_ON and turns[1] > _LEAVES and (one_stroke is None or one_stroke(path))
+        ends_on = turns[0] < _RUNS_ON and turns[1] > _LEAVES or turns[0] > _SPREAD
+        return ends_on and (one_stroke is None or one_stroke(path))
 
     def fork(k, stem):
         """The two other ends at three-way junction ``k`` if they fork away from ``stem``, else None."""
@@ -664,7 +671,7 @@ def trace_strokes(ink: np.ndarray, width: float | None = None, simplify: bool = 
 
     def one_stroke(path):
         """True where the ink along ``path`` (slivers filled) is one stroke wide, not two merged."""
-        if not filled_dt:  # needed only where a long stem runs on into a branch: rare
+        if not filled_dt:  # needed only at a long dead-end stem of a fork: rare
             filled_dt.append(ndimage.distance_transform_edt(filled))
         rows, cols = np.asarray(path).T
         return 2.0 * float(np.median(filled_dt[0][rows, cols])) <= _ONE_STROKE * width
