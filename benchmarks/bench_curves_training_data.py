@@ -27,7 +27,7 @@ from _harness import write_results  # noqa: E402
 
 from nurbskit.curves import synthetic  # noqa: E402
 from nurbskit.curves.nets.models import build  # noqa: E402
-from nurbskit.curves.nets.train import LOSSES, batch_maker, redrawn_batch_maker  # noqa: E402
+from nurbskit.curves.nets.train import LOSSES, TRAIN_SPACING, batch_maker, redrawn_batch_maker  # noqa: E402
 from nurbskit.learn import batch_generator  # noqa: E402
 
 
@@ -74,9 +74,9 @@ def main() -> None:
         config = synthetic.mode_config("MV", 128)
         for seed in range(5):
             synthetic.render_batch = before
-            a = synthetic.make_torch_batch(batch_generator(12, seed), 32, config, spacing=0.25)
+            a = synthetic.make_torch_batch(batch_generator(12, seed), 32, config, spacing=TRAIN_SPACING)
             synthetic.render_batch = now
-            b = synthetic.make_torch_batch(batch_generator(12, seed), 32, config, spacing=0.25)
+            b = synthetic.make_torch_batch(batch_generator(12, seed), 32, config, spacing=TRAIN_SPACING)
             assert torch.equal(a.image, b.image), "the two renderers differ"
     rows = []
     for name, maker in (("MV, drawings", batch_maker("MV", 64)), ("MV, redrawn", redrawn_batch_maker("MV", 64))):
