@@ -155,3 +155,12 @@ def test_stage_bars_draw_each_stage_on_stderr_unless_quiet(capsys):
         err = capsys.readouterr().err
         assert ("tracing strokes" in err and "fitting strokes" in err) is not quiet
         assert quiet is (err == "")
+
+
+def test_train_curves_sketch_is_an_option_of_mv_only(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["train", "curves", "--mode", "V", "--sketch", "5", "--steps", "1", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "--sketch" in err and "MV" in err and "Traceback" not in err
+    assert not out.exists()

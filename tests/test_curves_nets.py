@@ -12,7 +12,8 @@ import torch
 import nurbskit
 from _assert import assert_close
 from nurbskit.curves.nets.models import build
-from nurbskit.curves.nets.train import LOSSES, batch_maker, hungarian, network_inputs, predicted_count
+from nurbskit.curves.nets.train import (LOSSES, batch_maker, hungarian, network_inputs, predicted_count,
+                                        sketch_targets)
 from nurbskit.curves.synthetic import (curve_samples, dense_samples, make_torch_batch, mode_config, render,
                                        render_batch)
 from nurbskit.learn import batch_generator
@@ -95,20 +96,35 @@ def test_batch_curves_lie_where_their_control_points_say():
             assert s.image[rows, cols].max() <= 0.25
 
 
-@pytest.mark.parametrize("mode", ["V", "M", "MV"])
-def test_forward_backward_on_a_batch(mode):
+@pytest.mark.parametrize("mode, arch", [("V", {}), ("M", {}), ("MV", {}), ("MV", {"sketch": 5})])
+def test_forward_backward_on_a_batch(mode, arch):
     torch.manual_seed(0)
-    model = build(mode)
+    model = build(mode, arch)
     data = batch_maker(mode, 32)(batch_generator(0, 0), 6)
     loss, parts = LOSSES[mode](model, data)
     assert loss.ndim == 0 and torch.isfinite(loss)
     assert 0 <= float(parts["mse"].detach()) <= 1
+    assert ("sketch_mse" in parts) == bool(arch)
     loss.backward()
     grads = [p.grad for p in model.parameters()]
     assert all(g is not None and torch.isfinite(g).all() for g in grads)
     assert sum(float(g.abs().sum()) for g in grads) > 0
     size_mb = sum(p.numel() for p in model.parameters()) * 4 / 2**20
     assert size_mb <= 2.0  # the shipped file's budget
+
+
+def test_sketch_targets_are_the_curves_at_evenly_spaced_parameters():
+    batch = make_torch_batch(_gen(5), 8, mode_config("MV", 64))
+    got = sketch_targets(batch.points, batch.counts, 7)
+    u = torch.linspace(0, 1, 7, dtype=torch.float64)
+    for b in range(8):
+        for k in range(batch.points.shape[1]):
+            n = int(batch.counts[b, k])
+            if n == 0:
+                assert got[b, k].abs().max() == 0
+                continue
+            curve = nurbskit.NURBSCurve(batch.points[b, k, :n].double(), 3)
+            assert_close(got[b, k], curve.evaluate(u), atol=1e-12, rtol=0)
 
 
 def test_hungarian_equals_brute_force():

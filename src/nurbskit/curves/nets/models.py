@@ -193,37 +193,73 @@ class HierarchicalModel(nn.Module):
     ``forward(ink, curves, points) -> (points (B, curves, points, 2), point-stop logits
     (B, curves, points, 2), curve-stop logits (B, curves, 2))``: every curve is decoded for
     ``points`` steps (the loss reads the steps its matched target has).
+
+    ``sketch = S > 0`` (beyond the paper; the default 0 is the paper's model, and a weights
+    file records its own in ``meta["arch"]``): each curve step reads the feature map
+    through ``S`` attention heads that place a sketch of the curve (:meth:`curve_codes`).
     """
 
     mode = "MV"
 
-    def __init__(self, width: int = 32, dim: int = 96, hidden: int = 128, code: int = 64):
+    def __init__(self, width: int = 32, dim: int = 96, hidden: int = 128, code: int = 64, sketch: int = 0):
         super().__init__()
         self.encoder = Encoder(width, dim)
         self.init = nn.Linear(dim, hidden)
-        self.attend = Attention(dim, hidden)
-        self.cell = nn.GRUCell(dim + code, hidden)
-        self.head = _mlp(hidden, hidden, code + 2)
-        self.point_init = nn.Linear(code, hidden)
-        self.points = PointDecoder(dim, hidden, code)
-        self.code = code
+        self.code, self.sketch = code, sketch
+        full = code + 2 * sketch  # what a curve hands its point decoder: the code and the sketch
+        if sketch:
+            self.keys = nn.Linear(dim, 64)
+            self.query = nn.Linear(hidden, 64, bias=False)
+            self.score = nn.Linear(64, sketch)
+            self.mix = nn.Linear(sketch * dim, dim)
+        else:
+            self.attend = Attention(dim, hidden)
+        self.cell = nn.GRUCell(dim + full, hidden)
+        self.head = _mlp(hidden + (dim if sketch else 0), hidden, full + 2)
+        self.point_init = nn.Linear(full, hidden)
+        self.points = PointDecoder(dim, hidden, full)
 
     def curve_codes(self, ink: Tensor, curves: int) -> tuple[Tensor, Tensor, Tensor]:
-        """Tokens ``(B, L, D)``, curve codes ``(B, curves, code)``, curve-stop logits ``(B, curves, 2)``."""
+        """Tokens ``(B, L, D)``, curve codes ``(B, curves, code + 2 sketch)``, curve-stop logits ``(B, curves, 2)``.
+
+        With ``sketch = S > 0`` a curve step reads the feature map through ``S`` attention
+        heads, as M's does, and each head places one point of a sketch of the curve (where it
+        looks plus an offset): the curve at ``S`` evenly spaced parameters, which the loss
+        supervises (:func:`sketch_targets`). The sketch rides in the code's last ``2 S``
+        numbers (:meth:`sketch_points`), and the previous curve's sketch is fed back, as M
+        feeds back its previous curve.
+        """
         tokens, g = self.encoder(ink)
         b = ink.shape[0]
         h = torch.tanh(self.init(g))
-        keys = self.attend.v(tokens)
-        prev = tokens.new_zeros(b, self.code)
+        if self.sketch:
+            keys, centres = self.keys(tokens), token_centres(tokens)
+        else:
+            keys = self.attend.v(tokens)
+        prev = tokens.new_zeros(b, self.code + 2 * self.sketch)
         codes, stops = [], []
         for _ in range(curves):
-            h = self.cell(torch.cat([self.attend(tokens, h, keys)[0], prev], 1), h)
-            out = self.head(h)
-            z = torch.tanh(out[:, : self.code])
+            if self.sketch:
+                a = self.score(F.relu(keys + self.query(h)[:, None])).softmax(1)  # (B, L, S)
+                ctx = F.relu(self.mix(torch.einsum("bls,bld->bsd", a, tokens).flatten(1)))
+                h = self.cell(torch.cat([ctx, prev], 1), h)
+                out = self.head(torch.cat([h, ctx], 1))
+                offset = out[:, self.code: self.code + 2 * self.sketch].view(b, self.sketch, 2)
+                where = torch.einsum("bls,lc->bsc", a, centres)
+                sketch = (where + 0.5 * torch.tanh(offset)).clamp(0, 1)
+                z = torch.cat([torch.tanh(out[:, : self.code]), sketch.flatten(1)], 1)
+                prev = torch.cat([z[:, : self.code], sketch.detach().flatten(1)], 1)
+            else:
+                h = self.cell(torch.cat([self.attend(tokens, h, keys)[0], prev], 1), h)
+                out = self.head(h)
+                z = prev = torch.tanh(out[:, : self.code])
             codes.append(z)
-            stops.append(out[:, self.code:])
-            prev = z
+            stops.append(out[:, -2:])
         return tokens, torch.stack(codes, 1), torch.stack(stops, 1)
+
+    def sketch_points(self, codes: Tensor) -> Tensor | None:
+        """Codes ``(..., code + 2 S)`` -> the curves' sketches ``(..., S, 2)`` in the unit square (None when ``S = 0``)."""
+        return codes[..., self.code:].unflatten(-1, (self.sketch, 2)) if self.sketch else None
 
     def decode_points(self, tokens: Tensor, codes: Tensor, steps: int) -> tuple[Tensor, Tensor]:
         """Codes ``(B, K, code)`` -> points ``(B, K, steps, 2)``, stop logits ``(B, K, steps, 2)`` (curves batched)."""

@@ -19,6 +19,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
+from ...errors import OptionError
 from ..synthetic import Batch, curve_samples, make_torch_batch, mode_config
 from .models import MIN_POINTS, build
 
@@ -110,10 +111,32 @@ def loss_m(model, data) -> tuple[Tensor, dict]:
     return mse + STOP_WEIGHT * ce, {"mse": mse, "stop_ce": ce, "curve_acc": acc}
 
 
+def sketch_targets(points: Tensor, counts: Tensor, n: int, degree: int = 3) -> Tensor:
+    """The curves at ``n`` evenly spaced parameters: ``points (..., P, 2)``, ``counts (...)`` -> ``(..., n, 2)``.
+
+    Clamped uniform B-splines of ``counts`` control points (the generator's); a count of 0
+    gives zeros.
+    """
+    from ...core.basis import basis_matrix
+    from ...core.knots import clamped_uniform
+
+    p_max = points.shape[-2]
+    u = torch.linspace(0, 1, n, dtype=torch.float64)
+    table = torch.zeros(p_max + 1, n, p_max, dtype=torch.float64)  # basis per count, padded
+    for c in range(degree + 1, p_max + 1):
+        table[c, :, :c] = basis_matrix(clamped_uniform(c, degree, dtype=torch.float64), degree, c, u)
+    return torch.einsum("...sp,...pd->...sd", table.to(points)[counts], points)
+
+
+# The weight of the sketch's MSE (an MV with ``sketch > 0``; not in the paper): as the control points'.
+SKETCH_WEIGHT = 1.0
+
+
 def loss_mv(model, data) -> tuple[Tensor, dict]:
     ink, unit, counts, n_curves = data
     k, p = int(n_curves.max()), int(counts.max())
-    pred, point_stops, curve_stops = model(ink, k, p)  # (B, k, p, 2), (B, k, p, 2), (B, k, 2)
+    tokens, codes, curve_stops = model.curve_codes(ink, k)
+    pred, point_stops = model.decode_points(tokens, codes, p)  # (B, k, p, 2), (B, k, p, 2); stops (B, k, 2)
     target, cnt = unit[:, :k, :p], counts[:, :k]
     tmask = (torch.arange(p) < cnt[..., None]).float()  # (B, k, p) target points
     d = ((pred[:, :, None] - target[:, None]) ** 2).sum(-1)  # (B, i, j, p)
@@ -128,9 +151,15 @@ def loss_mv(model, data) -> tuple[Tensor, dict]:
     ce_cv = _stop_ce(curve_stops, n_curves - 1, valid_curve)
     right_curves = predicted_count(curve_stops) == n_curves
     right_points = (predicted_count(point_stops, MIN_POINTS) == mcnt).float()
-    return mse + STOP_WEIGHT * (ce_pt + ce_cv), {
-        "mse": mse, "point_ce": ce_pt, "curve_ce": ce_cv, "curve_acc": right_curves.float().mean(),
-        "point_acc": (right_points * valid_curve).sum() / valid_curve.sum()}
+    loss = mse + STOP_WEIGHT * (ce_pt + ce_cv)
+    logs = {"mse": mse, "point_ce": ce_pt, "curve_ce": ce_cv, "curve_acc": right_curves.float().mean(),
+            "point_acc": (right_points * valid_curve).sum() / valid_curve.sum()}
+    sketch = model.sketch_points(codes)
+    if sketch is not None:
+        logs["sketch_mse"] = _mse(sketch, sketch_targets(matched, mcnt, sketch.shape[-2]),
+                                  valid_curve[..., None].expand(sketch.shape[:-1]))
+        loss = loss + SKETCH_WEIGHT * logs["sketch_mse"]
+    return loss, logs
 
 
 LOSSES = {"V": loss_v, "M": loss_m, "MV": loss_mv}
@@ -218,6 +247,9 @@ def register_train(subparsers) -> None:
                    help="image: the drawings themselves (default); redrawn: the drawings' skeletons redrawn at "
                         "2 px, as the default hybrid method of `nurbskit curves` hands them to MV "
                         "(weights curves_<mode>_redrawn)")
+    p.add_argument("--sketch", type=int, choices=range(0, 9), default=0, metavar="S",
+                   help="MV only: each curve step also sketches its curve at S points, read by S attention heads "
+                        "(0, the default: the paper's one attention)")
     p.add_argument("--size", type=int, choices=(32, 64, 128), default=DEFAULT_SIZE,
                    help=f"network input in pixels (default {DEFAULT_SIZE}; the paper's is 128)")
     add_training_options(p, TrainConfig(steps=3000, batch_size=32, lr=2e-3, checkpoint_every=200))
@@ -229,7 +261,9 @@ def run_train_curves(args) -> int:
     from ...learn import TrainConfig
 
     config = training_config(args, TrainConfig(steps=3000, batch_size=32, lr=2e-3, checkpoint_every=200))
-    arch = {}
+    arch = {"sketch": args.sketch} if args.sketch else {}
+    if args.sketch and args.mode != "MV":
+        raise OptionError(f"--sketch: an option of MV, not of {args.mode}")
     redrawn = args.input == "redrawn"
     meta = {"name": f"curves_{args.mode.lower()}" + ("_redrawn" if redrawn else ""), "mode": args.mode,
             "input": args.input, "size": args.size, "arch": arch,
