@@ -258,11 +258,11 @@ class HierarchicalModel(nn.Module):
         return tokens, torch.stack(codes, 1), torch.stack(stops, 1)
 
     def sketch_points(self, codes: Tensor) -> Tensor | None:
-        """Codes ``(..., code + 2 S)`` -> the curves' sketches ``(..., S, 2)`` in the unit square (None when ``S = 0``)."""
+        """Codes ``(..., code + 2 S)`` -> the sketches ``(..., S, 2)`` in the unit square (None when ``S = 0``)."""
         return codes[..., self.code:].unflatten(-1, (self.sketch, 2)) if self.sketch else None
 
     def decode_points(self, tokens: Tensor, codes: Tensor, steps: int) -> tuple[Tensor, Tensor]:
-        """Codes ``(B, K, code)`` -> points ``(B, K, steps, 2)``, stop logits ``(B, K, steps, 2)`` (curves batched)."""
+        """Codes ``(B, K, code + 2 sketch)`` -> points and stop logits, each ``(B, K, steps, 2)`` (curves batched)."""
         b, k, _ = codes.shape
         flat = codes.reshape(b * k, -1)
         tok = tokens[:, None].expand(-1, k, -1, -1).reshape(b * k, *tokens.shape[1:])
