@@ -68,6 +68,32 @@ class Encoder(nn.Module):
         return tokens, tokens.mean(1)
 
 
+def pointed(where: Tensor, offset: Tensor) -> Tensor:
+    """A point where an attention head looks plus an offset of at most half the image, in the unit square."""
+    return (where + 0.5 * torch.tanh(offset)).clamp(0, 1)
+
+
+class PointingHeads:
+    """Several attention heads read a feature map in one step (M's curve step, MV's sketch).
+
+    A mixin: :meth:`_add_heads` gives the model ``keys``, ``query``, ``score`` and ``mix``
+    (the parameter names of the shipped weights); :meth:`_read_heads` scores every cell
+    against the GRU state for each head and returns the heads' mixed context ``(B, D)``
+    and where each head looks ``(B, S, 2)``.
+    """
+
+    def _add_heads(self, dim: int, hidden: int, heads: int) -> None:
+        self.keys = nn.Linear(dim, 64)
+        self.query = nn.Linear(hidden, 64, bias=False)
+        self.score = nn.Linear(64, heads)
+        self.mix = nn.Linear(heads * dim, dim)
+
+    def _read_heads(self, keys: Tensor, h: Tensor, tokens: Tensor, centres: Tensor) -> tuple[Tensor, Tensor]:
+        a = self.score(F.relu(keys + self.query(h)[:, None])).softmax(1)  # (B, L, S)
+        ctx = F.relu(self.mix(torch.einsum("bls,bld->bsd", a, tokens).flatten(1)))
+        return ctx, torch.einsum("bls,lc->bsc", a, centres)
+
+
 def token_centres(tokens: Tensor) -> Tensor:
     """The centres ``(L, 2)`` in the unit square of the cells of a square feature map's tokens ``(B, L, D)``."""
     n = int(round(tokens.shape[1] ** 0.5))
@@ -116,7 +142,7 @@ class PointDecoder(nn.Module):
             h = self.cell(x, h)
             out = self.head(torch.cat([h, ctx], 1))
             if self.pointer:  # where the attention looks, plus an offset: a strong prior for points near ink
-                p = (torch.einsum("bl,lc->bc", a, centres) + 0.5 * torch.tanh(out[:, :2])).clamp(0, 1)
+                p = pointed(torch.einsum("bl,lc->bc", a, centres), out[:, :2])
             else:
                 p = torch.sigmoid(out[:, :2])
             points.append(p)
@@ -144,7 +170,7 @@ class PointModel(nn.Module):
         return self.points(tokens, torch.tanh(self.init(g)), steps)
 
 
-class MultiCurveModel(nn.Module):
+class MultiCurveModel(PointingHeads, nn.Module):
     """M: several curves of ``n_points`` control points each (paper 4.2).
 
     Each curve step reads the feature map through ``n_points`` attention heads, one per
@@ -159,10 +185,7 @@ class MultiCurveModel(nn.Module):
         self.n_points = n_points
         self.encoder = Encoder(width, dim)
         self.init = nn.Linear(dim, hidden)
-        self.keys = nn.Linear(dim, 64)
-        self.query = nn.Linear(hidden, 64, bias=False)
-        self.score = nn.Linear(64, n_points)
-        self.mix = nn.Linear(n_points * dim, dim)
+        self._add_heads(dim, hidden, n_points)
         self.cell = nn.GRUCell(dim + 2 * n_points, hidden)
         self.head = _mlp(hidden + dim, hidden, 2 * n_points + 2)
 
@@ -175,19 +198,17 @@ class MultiCurveModel(nn.Module):
         prev = tokens.new_zeros(b, 2 * self.n_points)
         points, stops = [], []
         for _ in range(curves):
-            a = self.score(F.relu(keys + self.query(h)[:, None])).softmax(1)  # (B, L, n_points)
-            ctx = F.relu(self.mix(torch.einsum("blp,bld->bpd", a, tokens).flatten(1)))
+            ctx, where = self._read_heads(keys, h, tokens, centres)
             h = self.cell(torch.cat([ctx, prev], 1), h)
             out = self.head(torch.cat([h, ctx], 1))
-            where = torch.einsum("blp,lc->bpc", a, centres)
-            p = (where + 0.5 * torch.tanh(out[:, : 2 * self.n_points].view(b, self.n_points, 2))).clamp(0, 1)
+            p = pointed(where, out[:, : 2 * self.n_points].view(b, self.n_points, 2))
             points.append(p)
             stops.append(out[:, 2 * self.n_points:])
             prev = p.detach().flatten(1)
         return torch.stack(points, 1), torch.stack(stops, 1)
 
 
-class HierarchicalModel(nn.Module):
+class HierarchicalModel(PointingHeads, nn.Module):
     """MV: several curves, each with a variable number of control points (paper 4.3).
 
     ``forward(ink, curves, points) -> (points (B, curves, points, 2), point-stop logits
@@ -208,10 +229,7 @@ class HierarchicalModel(nn.Module):
         self.code, self.sketch = code, sketch
         full = code + 2 * sketch  # what a curve hands its point decoder: the code and the sketch
         if sketch:
-            self.keys = nn.Linear(dim, 64)
-            self.query = nn.Linear(hidden, 64, bias=False)
-            self.score = nn.Linear(64, sketch)
-            self.mix = nn.Linear(sketch * dim, dim)
+            self._add_heads(dim, hidden, sketch)
         else:
             self.attend = Attention(dim, hidden)
         self.cell = nn.GRUCell(dim + full, hidden)
@@ -240,13 +258,10 @@ class HierarchicalModel(nn.Module):
         codes, stops = [], []
         for _ in range(curves):
             if self.sketch:
-                a = self.score(F.relu(keys + self.query(h)[:, None])).softmax(1)  # (B, L, S)
-                ctx = F.relu(self.mix(torch.einsum("bls,bld->bsd", a, tokens).flatten(1)))
+                ctx, where = self._read_heads(keys, h, tokens, centres)
                 h = self.cell(torch.cat([ctx, prev], 1), h)
                 out = self.head(torch.cat([h, ctx], 1))
-                offset = out[:, self.code: self.code + 2 * self.sketch].view(b, self.sketch, 2)
-                where = torch.einsum("bls,lc->bsc", a, centres)
-                sketch = (where + 0.5 * torch.tanh(offset)).clamp(0, 1)
+                sketch = pointed(where, out[:, self.code: self.code + 2 * self.sketch].view(b, self.sketch, 2))
                 z = torch.cat([torch.tanh(out[:, : self.code]), sketch.flatten(1)], 1)
                 prev = torch.cat([z[:, : self.code], sketch.detach().flatten(1)], 1)
             else:

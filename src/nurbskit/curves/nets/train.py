@@ -14,6 +14,8 @@ Every model trains through :func:`nurbskit.learn.train` (``nurbskit train curves
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -117,15 +119,21 @@ def sketch_targets(points: Tensor, counts: Tensor, n: int, degree: int = 3) -> T
     Clamped uniform B-splines of ``counts`` control points (the generator's); a count of 0
     gives zeros.
     """
+    table = _sketch_basis(points.shape[-2], n, degree).to(points)
+    return torch.einsum("...sp,...pd->...sd", table[counts], points)
+
+
+@functools.lru_cache(maxsize=None)
+def _sketch_basis(p_max: int, n: int, degree: int) -> Tensor:
+    """``(p_max + 1, n, p_max)`` float64: per count, the basis at ``n`` evenly spaced parameters, zero-padded."""
     from ...core.basis import basis_matrix
     from ...core.knots import clamped_uniform
 
-    p_max = points.shape[-2]
     u = torch.linspace(0, 1, n, dtype=torch.float64)
-    table = torch.zeros(p_max + 1, n, p_max, dtype=torch.float64)  # basis per count, padded
+    table = torch.zeros(p_max + 1, n, p_max, dtype=torch.float64)
     for c in range(degree + 1, p_max + 1):
         table[c, :, :c] = basis_matrix(clamped_uniform(c, degree, dtype=torch.float64), degree, c, u)
-    return torch.einsum("...sp,...pd->...sd", table.to(points)[counts], points)
+    return table
 
 
 # The weight of the sketch's MSE (an MV with ``sketch > 0``; not in the paper): as the control points'.
