@@ -20,6 +20,10 @@ Method:
   For the latter the MSE decodes every view for the true number of points (a view
   flipped left to right emits the sequence backwards, so its first n points are reversed)
   and the point accuracy is the count read from the averaged stop probabilities.
+  For an MV with a sketch (``--sketch S``) also how far its sketch points lie from the
+  true curve's points at the same parameters (``train.sketch_targets``), in pixels at
+  128 px, each sketch matched to a true curve by the Hungarian algorithm on that
+  distance: the mean over all curves and per number of curves in the drawing.
 - Table 1: on the first ``--refine`` images per mode, the Chamfer to the true curves of
   the network alone, of the network's curves refined by Chamfer against the ink pixels
   (``nurbskit.curves.classic.refine``, 20 L-BFGS iterations; the network read as table 2
@@ -70,7 +74,7 @@ from nurbskit.curves.classic import (  # noqa: E402
 from nurbskit.curves.nets.models import MAX_POINTS, MIN_POINTS  # noqa: E402
 from nurbskit.curves.nets.predict import (  # noqa: E402
     DEFAULT_VIEWS, load_model, network_curves, predict_unit, read_views, refined_curves, to_curves)
-from nurbskit.curves.nets.train import LOSSES, _mse, network_inputs  # noqa: E402
+from nurbskit.curves.nets.train import LOSSES, _mse, hungarian, network_inputs, sketch_targets  # noqa: E402
 from nurbskit.curves.synthetic import curve_of, dense_samples, make_torch_batch, mode_config  # noqa: E402
 from nurbskit.learn import batch_generator  # noqa: E402
 
@@ -97,6 +101,7 @@ def table2(mode: str, count: int, chunk: int = 100, views: int = 1):
     config = mode_config(mode, SIZE)
     sums = {}
     chamfers, images = [], []
+    sketch_px = {1: [], 2: [], 3: []}
     done = 0
     while done < count:
         n = min(chunk, count - done)
@@ -115,6 +120,9 @@ def table2(mode: str, count: int, chunk: int = 100, views: int = 1):
                      "point_acc": (read == true).float().mean()}
         for k, v in parts.items():
             sums[k] = sums.get(k, 0.0) + float(v) * n
+        if getattr(model, "sketch", 0):
+            for k, d in _sketch_distances(model, ink, unit, batch).items():
+                sketch_px[k] += d
         predicted = predict_unit(model, ink, views)
         for b, s in enumerate(batch.samples()):
             curves = to_curves(predicted[b], SIZE, SIZE)
@@ -130,8 +138,29 @@ def table2(mode: str, count: int, chunk: int = 100, views: int = 1):
         if key in sums:
             row[key] = sums[key] / count
             row[f"paper_{key}"] = PAPER[mode].get(key)
+    if sketch_px[1]:
+        row["sketch_px"] = statistics.fmean(sketch_px[1] + sketch_px[2] + sketch_px[3])
+        for k, d in sketch_px.items():
+            row[f"sketch_px_{k}_curves"] = statistics.fmean(d)
     row["steps"] = meta.get("steps")
     return row, images
+
+
+def _sketch_distances(model, ink, unit, batch) -> dict[int, list[float]]:
+    """Pixels from each sketch point to the true curve's point at its parameter, sketches
+    matched to true curves (Hungarian on the mean squared distance), by curves per drawing."""
+    k = int(batch.n_curves.max())
+    with torch.no_grad():
+        _, codes, _ = model.curve_codes(ink, k)
+    sketch = model.sketch_points(codes)  # (B, k, S, 2)
+    true = sketch_targets(unit[:, :k], batch.counts[:, :k], sketch.shape[-2])
+    perm = hungarian(((sketch[:, :, None] - true[:, None]) ** 2).sum(-1).mean(-1), batch.n_curves)
+    matched = true.gather(1, perm[..., None, None].expand_as(true))
+    px = ((sketch - matched) ** 2).sum(-1).sqrt().mean(-1) * SIZE  # (B, k): mean over a sketch's points
+    out = {1: [], 2: [], 3: []}
+    for b, n in enumerate(batch.n_curves.tolist()):
+        out[n] += px[b, :n].tolist()
+    return out
 
 
 def _counts_right(curves, truth) -> bool:
