@@ -42,7 +42,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     from ..io._base import check_readable
-    from .classic import to_grey
+    from ..io.image import pil_grey
 
     path = check_readable(path)
     try:
@@ -53,10 +53,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
                 im.load()
                 if im.width == 0 or im.height == 0:
                     raise InputError(f"{path}: the image is empty ({im.width} x {im.height} pixels)")
-                if im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info):
-                    array = np.asarray(im.convert("RGBA"))
-                else:
-                    array = np.asarray(im.convert("L"))
+                return pil_grey(im, str(path))
     except InputError:  # ours (the memory check, an empty image): already one line naming the file
         raise
     except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
@@ -65,7 +62,6 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         raise InputError(f"{path}: not a readable image (expected PNG, JPEG, BMP, TIFF, ...)") from None
     except (OSError, ValueError, SyntaxError) as exc:
         raise InputError(f"{path}: not a readable image ({exc})") from None
-    return to_grey(array, str(path))
 
 
 def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", tolerance: float = 1.0,

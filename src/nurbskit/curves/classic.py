@@ -43,6 +43,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import InputError, OptionError
+from ..io.image import to_grey
 
 # Weight of the control polygon's second differences in the least squares (see fit_stroke).
 _SMOOTH = 1e-2
@@ -77,36 +78,6 @@ class Strokes:
     ink: np.ndarray
     width: float
     inverted: bool
-
-
-def to_grey(image, source: str = "image") -> np.ndarray:
-    """``(H, W)`` or ``(H, W, 3|4)`` array (any numeric dtype) -> ``(H, W)`` float64 in [0, 1]."""
-    a = np.asarray(image)
-    if a.dtype == bool:
-        a = a.astype(np.float64)
-    if not np.issubdtype(a.dtype, np.number):
-        raise InputError(f"{source}: expected a numeric image array, got dtype {a.dtype}")
-    if a.ndim == 3 and a.shape[-1] in (3, 4):
-        rgb = a[..., :3].astype(np.float64)
-        if a.shape[-1] == 4:  # composite onto white: transparent means background
-            alpha = a[..., 3].astype(np.float64)
-            alpha = alpha / (alpha.max() if alpha.max() > 1 else 1.0)
-            top = 255.0 if np.issubdtype(a.dtype, np.integer) else 1.0
-            rgb = rgb * alpha[..., None] + top * (1 - alpha[..., None])
-        a = rgb @ np.array([0.299, 0.587, 0.114])
-    if a.ndim != 2:
-        raise InputError(f"{source}: expected an (H, W) grey or (H, W, 3|4) colour image, got shape {a.shape}")
-    if a.size == 0:
-        raise InputError(f"{source}: the image is empty (shape {a.shape})")
-    a = a.astype(np.float64)
-    if not np.isfinite(a).all():
-        raise InputError(f"{source}: the image holds non-finite values")
-    if np.issubdtype(np.asarray(image).dtype, np.integer):
-        a = a / float(np.iinfo(np.asarray(image).dtype).max)
-    elif a.max() > 1.0 or a.min() < 0.0:
-        lo, hi = a.min(), a.max()
-        a = (a - lo) / (hi - lo) if hi > lo else np.zeros_like(a)
-    return a
 
 
 # Lighting that varies by more than this (grey levels in [0, 1], across the image) is

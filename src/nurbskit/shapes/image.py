@@ -180,7 +180,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         (25.0, 10.0)
     """
     from ..curves.api import read_image
-    from ..curves.classic import to_grey
+    from ..io.image import to_grey
     from .profile import fit_profile
 
     if axis not in AXES:

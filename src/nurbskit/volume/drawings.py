@@ -58,28 +58,12 @@ def check_pixels(size: tuple[int, int], label: str) -> None:
     require_memory(pixels * 16, f"{label} ({width} x {height} pixels)", "scale the image down")
 
 
-def _otsu(gray: np.ndarray) -> float:
-    """Otsu's threshold of a gray image in [0, 1] (256 bins)."""
-    hist, edges = np.histogram(gray, bins=256, range=(0.0, 1.0))
-    centres = (edges[:-1] + edges[1:]) / 2
-    w0 = np.cumsum(hist)
-    w1 = w0[-1] - w0
-    m0 = np.cumsum(hist * centres)
-    mu0 = m0 / np.maximum(w0, 1)
-    mu1 = (m0[-1] - m0) / np.maximum(w1, 1)
-    between = w0 * w1 * (mu0 - mu1) ** 2
-    return float(centres[int(np.argmax(between[:-1]))])
-
-
 def _gray_from_pil(image, source: str) -> np.ndarray:
-    """Gray levels in [0, 1] of a Pillow image; transparent pixels become white paper."""
-    from PIL import Image
+    """Gray levels in [0, 1] of a Pillow image (:func:`nurbskit.io.image.pil_grey`:
+    transparent pixels are white paper, 16-bit scans keep their depth)."""
+    from ..io.image import pil_grey
 
-    if image.mode in ("RGBA", "LA", "PA") or (image.mode == "P" and "transparency" in image.info):
-        rgba = image.convert("RGBA")
-        paper = Image.new("RGBA", rgba.size, (255, 255, 255, 255))
-        image = Image.alpha_composite(paper, rgba)
-    gray = np.asarray(image.convert("L"), dtype=np.float64) / 255.0
+    gray = pil_grey(image, source)
     if gray.ndim != 2 or min(gray.shape) < 2:
         raise InputError(f"{source}: expected a 2-D image at least 2 x 2 pixels, got shape {gray.shape}")
     return gray
@@ -96,8 +80,9 @@ def mask_from_gray(gray: np.ndarray, source: str = "drawing") -> np.ndarray:
         if lo > 0.5:
             raise InputError(f"{source}: the drawing is empty (a uniform light image, no shape found)")
         raise InputError(f"{source}: the drawing is all filled (a uniform dark image, no background found)")
-    threshold = _otsu(gray)
-    dark = gray <= threshold
+    from skimage.filters import threshold_otsu
+
+    dark = gray <= threshold_otsu(gray)  # as the curves and shapes readers threshold
     border = np.concatenate([dark[0], dark[-1], dark[1:-1, 0], dark[1:-1, -1]])
     # The background is what most of the border shows; the shape is the other side.
     shape = ~dark if border.mean() > 0.5 else dark
