@@ -86,3 +86,14 @@ def test_non_finite_float_images_are_refused(tmp_path):
     Image.fromarray(values).save(tmp_path / "nan.tif")
     with pytest.raises(InputError, match="nan.tif: the image holds non-finite values"):
         read_image(tmp_path / "nan.tif")
+
+
+@pytest.mark.parametrize("orientation, turn", [(1, 0), (3, 2), (6, -1), (8, 1)])
+def test_photographs_are_read_upright(tmp_path, orientation, turn):
+    stored = np.zeros((20, 30), np.uint8)
+    stored[2:5, 3:12] = 255  # a mark near the stored image's top-left corner
+    exif = Image.Exif()
+    exif[0x0112] = orientation  # EXIF Orientation: how a viewer turns the stored pixels
+    path = tmp_path / "photo.png"
+    Image.fromarray(stored).save(path, exif=exif)
+    np.testing.assert_array_equal(read_image(path), np.rot90(stored, turn) / 255.0)

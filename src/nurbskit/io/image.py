@@ -12,6 +12,8 @@ from three drawings); each pipeline opens its files itself, with its own memory 
   arrays are full scale for the smallest of 0..1, 0..255 and 0..65,535 that holds their
   values, and stretched from their minimum to their maximum otherwise; float images (``F``) and arrays are taken
   as they are when they lie in [0, 1] and stretched otherwise.
+- Photographs are turned upright by their EXIF orientation, as every viewer shows them,
+  so that pixel coordinates are those of the image the user sees.
 - Transparent pixels are paper: colour is composited onto white by its alpha, then
   weighted to luma (ITU-R 601: 0.299 R + 0.587 G + 0.114 B, Pillow's ``L``).
 """
@@ -75,7 +77,13 @@ def _full_scale(a: np.ndarray) -> float | None:
 
 
 def pil_grey(image, source: str = "image") -> np.ndarray:
-    """A loaded Pillow image -> ``(H, W)`` float64 grey in [0, 1] (see the module's rules)."""
+    """A loaded Pillow image -> ``(H, W)`` float64 grey in [0, 1] (see the module's rules),
+    turned upright as its EXIF orientation says (a phone's photograph of a drawing is
+    stored as the sensor saw it; viewers, and so the user, see it turned)."""
+    from PIL import ImageOps
+
+    if image.getexif().get(0x0112, 1) != 1:  # EXIF Orientation; no copy of an upright image
+        image = ImageOps.exif_transpose(image)
     if image.mode in ("RGBA", "LA", "PA") or (image.mode == "P" and "transparency" in image.info):
         array = np.asarray(image.convert("RGBA"))
     elif image.mode.startswith(("I", "F")):  # 16- and 32-bit integers, 32-bit floats
