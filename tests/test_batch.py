@@ -113,6 +113,14 @@ def run_probe(args) -> int:
             time.sleep(0.01)
     if word == "bad":
         raise InputError(f"{args.input}: not a probe")
+    if word in ("swallow", "status"):  # a command that makes its own of the timeout
+        try:
+            while True:
+                time.sleep(0.01)
+        except BaseException:  # noqa: BLE001 - the point of this probe
+            if word == "status":
+                print("probe: stopped", file=sys.stderr)
+                return 1
     with output_directory(args.out, args.overwrite) as tmp:
         report = {"value": len(word) * args.scale, "threads": torch.get_num_threads(), "pid": os.getpid()}
         (tmp / "report.json").write_text(json.dumps(report))
@@ -169,7 +177,8 @@ def test_fit_folder_six_results_one_recorded_failure_then_resume_does_no_work(cl
         assert by[f"cloud{i}"]["metrics"] == {"to_surface_mean": report["metrics"]["to_surface_mean"],
                                               "to_surface_p95": report["metrics"]["to_surface_p95"]}
         assert 0 < report["metrics"]["to_surface_mean"] <= report["metrics"]["to_surface_p95"]
-    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []  # no temporary leftovers
+    # no temporary leftovers; the manifest lists the summary files the batch wrote
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".nurbskit-manifest.json"]
 
     # The outputs are those of the single command (same seed, same options).
     from nurbskit.cli import main
@@ -297,7 +306,7 @@ def test_timeout_stops_the_task_and_records_it(client, tmp_path):
     assert records["slow"]["error"] == "timed out after 1.5 s (--timeout)"
     assert records["y"]["status"] == "ok"
     assert time.perf_counter() - start < 60  # the endless loop was stopped (no assertion on speed)
-    assert [p.name for p in (tmp_path / "out").iterdir() if p.name.startswith(".")] == []
+    assert [p.name for p in (tmp_path / "out").iterdir() if p.name.startswith(".")] == [".nurbskit-manifest.json"]
 
 
 # --- the command line: its own cluster, interrupts, an external scheduler ---------------------
@@ -653,13 +662,13 @@ def test_summary_rows_and_aggregate():
 
 
 def test_deadline_interrupts_python_loops_and_leaves_no_stray_exception():
-    from nurbskit.batch.task import TaskTimeout, deadline
+    from nurbskit.batch.task import Deadline, TaskTimeout
 
     with pytest.raises(TaskTimeout):
-        with deadline(0.2):
+        with Deadline(0.2):
             while True:
                 time.sleep(0.001)
-    with deadline(5.0):  # finishes in time: nothing is raised, then or later
+    with Deadline(5.0):  # finishes in time: nothing is raised, then or later
         total = sum(range(1000))
     for _ in range(200):
         time.sleep(0.001)
@@ -712,3 +721,157 @@ def test_summary_figure_with_values_equal_up_to_rounding(tmp_path):
                for n, x in (("a", v), ("b", float(np.nextafter(v, 1.0))))]
     path = plot_summary(records, tmp_path / "summary.png")
     assert path.is_file() and path.stat().st_size > 1000
+
+
+# --- refused before any work: summary files, --scheduler, --memory-limit, --out ---------------
+
+def test_summary_files_the_batch_did_not_write_are_never_replaced(client, tmp_path, monkeypatch, capsys):
+    inputs = _probes(tmp_path / "in", {"a": "aa", "b": "bbb"})
+    monkeypatch.setitem(batch_commands.COMMANDS, "probe", PROBE)
+    from nurbskit.cli import main
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.csv").write_text("my,csv\n")
+    (mine / "summary.png").write_bytes(b"my picture")
+    for flag in ("--resume", "--overwrite"):
+        assert main(["batch", "probe", str(inputs), "--out", str(mine), flag, "--scheduler",
+                     client.scheduler.address, "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "summary.csv (not in its .nurbskit-manifest.json)" in err
+        assert "summary.png" in err and "Traceback" not in err
+    assert sorted(p.name for p in mine.iterdir()) == ["summary.csv", "summary.png"]  # nothing run, nothing written
+    assert (mine / "summary.csv").read_text() == "my,csv\n"
+
+    # The batch's own summary files are listed in the folder's manifest, so that a later
+    # --resume or --overwrite of its own run replaces them.
+    out = tmp_path / "out"
+    nurbskit.batch.run(PROBE, [inputs], out, client=client)
+    manifest = json.loads((out / ".nurbskit-manifest.json").read_text())["files"]
+    assert manifest == {n: (out / n).stat().st_size for n in ("summary.csv", "summary.json", "summary.png")}
+    records = nurbskit.batch.run(PROBE, [inputs], out, client=client, overwrite=True, figure=False)
+    assert [r["status"] for r in records] == ["ok", "ok"]
+    assert not (out / "summary.png").exists()  # the earlier run's figure, which this run did not redo
+    assert sorted(json.loads((out / ".nurbskit-manifest.json").read_text())["files"]) == ["summary.csv", "summary.json"]
+    assert [r["resumed"] for r in nurbskit.batch.run(PROBE, [inputs], out, client=client, resume=True)] == [True, True]
+    # A summary file the user changed since is theirs now.
+    with open(out / "summary.json", "a") as handle:
+        handle.write("my note\n")
+    with pytest.raises(OptionError, match=r"summary.json \(changed since nurbskit batch wrote it\)"):
+        nurbskit.batch.run(PROBE, [inputs], out, client=client, resume=True)
+    assert (out / "summary.json").read_text().endswith("my note\n")
+
+
+@pytest.mark.parametrize("address", ["garbage", "tcp://host", "tcp://host:port", "tcp://host:99999", "foo://host:1",
+                                     "inproc://x"])
+def test_a_bad_scheduler_address_is_refused_before_any_work(tmp_path, monkeypatch, capsys, address):
+    _require_dask()
+    from nurbskit.cli import main
+
+    monkeypatch.setattr(runner, "connect", lambda *a, **k: pytest.fail("connected to a bad address"))
+    monkeypatch.setitem(batch_commands.COMMANDS, "probe", PROBE)
+    inputs = _probes(tmp_path / "in", {"a": "a"})
+    assert main(["batch", "probe", str(inputs), "--out", str(tmp_path / "out"), "--scheduler", address]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--scheduler: expected tcp://HOST:PORT" in err and repr(address) in err
+    assert not (tmp_path / "out").exists()
+    assert runner.check_scheduler_address("tcp://10.0.0.5:8786") == "tcp://10.0.0.5:8786"
+    assert runner.check_scheduler_address("localhost:8786") == "localhost:8786"
+
+
+def test_an_unreachable_scheduler_fails_in_bounded_time_and_writes_nothing(tmp_path, monkeypatch):
+    _require_dask()
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT", 1.0)  # 20 s in use; the test needs only the behaviour
+    inputs = _probes(tmp_path / "in", {"a": "a"})
+    address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
+    with pytest.raises(OptionError, match=f"--scheduler {address}: cannot connect"):
+        nurbskit.batch.run(PROBE, [inputs], tmp_path / "out", scheduler=address)
+    assert not (tmp_path / "out").exists()
+
+
+def test_memory_limits_too_small_for_a_worker_are_refused(tmp_path, monkeypatch, capsys):
+    _require_dask()
+    from nurbskit.cli import main
+
+    monkeypatch.setattr(runner, "connect", lambda *a, **k: pytest.fail("a cluster was started"))
+    monkeypatch.setitem(batch_commands.COMMANDS, "probe", PROBE)
+    inputs = _probes(tmp_path / "in", {"a": "a"})
+    for size in ("1KB", "400MB"):
+        assert main(["batch", "probe", str(inputs), "--out", str(tmp_path / "out"), "--memory-limit", size]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--memory-limit: expected at least 512 MiB" in err and size in err
+    assert not (tmp_path / "out").exists()
+    assert runner._memory_bytes("512MiB") == runner.MIN_WORKER_MEMORY
+    import psutil
+
+    too_many = psutil.virtual_memory().total // runner.MIN_WORKER_MEMORY + 1
+    with pytest.raises(OptionError, match="--memory-limit auto: .* lower --workers"):
+        runner._check_fits_in_memory(too_many, None)
+
+
+def test_out_equal_to_the_input_folder_says_so(tmp_path, monkeypatch, capsys):
+    from nurbskit.cli import main
+
+    monkeypatch.setitem(batch_commands.COMMANDS, "probe", PROBE)
+    inputs = _probes(tmp_path / "in", {"a": "a"})
+    assert main(["batch", "probe", str(inputs), "--out", str(inputs), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "found the input folder" in err and "holds no" not in err
+    assert sorted(p.name for p in inputs.iterdir()) == ["a.probe"]
+
+
+# --- timeouts: never ok past the deadline, never printed as a traceback -----------------------
+
+def test_an_item_that_survives_its_timeout_is_still_timed_out(tmp_path):
+    from nurbskit.batch.task import read_marker, run_item
+
+    inputs = _probes(tmp_path / "in", {"swallow": "swallow", "status": "status"})
+    items = {i.name: i for i in find_items([inputs], PROBE)}
+    out = tmp_path / "out"
+    for name in ("swallow", "status"):  # the command swallows the exception, or turns it into a status
+        record = run_item(items[name], command=PROBE, out_root=str(out), timeout=0.3)
+        assert (record["status"], record["error"]) == ("failed", "timed out after 0.3 s (--timeout)")
+    assert read_marker(out / "swallow") is None  # its output is there but not complete: --resume redoes it
+
+
+def test_a_timeout_python_could_not_raise_is_delivered_again_silently():
+    # Dask's GC diagnosis runs Python code in every collection of a worker: a TaskTimeout
+    # delivered there (or in a __del__) is "ignored", was printed with a traceback, and the
+    # task ran on and was reported ok.
+    import gc
+
+    from nurbskit.batch.task import Deadline, TaskTimeout, _in_gc_callback
+
+    class RaisesWhenCollected:
+        def __del__(self):
+            raise TaskTimeout  # what Python does with an exception delivered into a __del__
+
+    printed = []
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = printed.append
+    try:
+        with pytest.raises(TaskTimeout):
+            with Deadline(0.2) as clock:
+                try:
+                    while True:
+                        time.sleep(0.001)
+                except TaskTimeout:
+                    pass  # the first delivery: lost here, as in a gc callback
+                assert clock.expired and not gc.isenabled()  # no collection (no callback) until it lands
+                RaisesWhenCollected()  # an unraisable TaskTimeout: not printed, delivered again
+                end = time.perf_counter() + 5.0
+                while time.perf_counter() < end:
+                    time.sleep(0.001)
+    finally:
+        sys.unraisablehook = previous_hook
+    assert printed == []
+    assert gc.isenabled()
+
+    seen = []
+    callback = lambda phase, info: seen.append(_in_gc_callback(threading.get_ident()))  # noqa: E731
+    gc.callbacks.append(callback)
+    try:
+        gc.collect(0)
+    finally:
+        gc.callbacks.remove(callback)
+    assert seen == [True, True] and not _in_gc_callback(threading.get_ident())

@@ -92,15 +92,13 @@ def test_convert_nurbs_and_ctrlpts_options(tmp_path, capsys):
     assert rc == 0 and "shape" in json.loads((tmp_path / "g.json").read_text())
 
 
-def test_convert_onto_itself_keeps_the_data(tmp_path, capsys):
+def test_convert_onto_itself_is_refused_and_keeps_the_file(tmp_path, capsys):
     path = tmp_path / "self.ply"
     write_mesh(path, *TETRA)
-    before = read_mesh(path)
-    assert run(capsys, "convert", path, path, "--ascii")[0] == 0
-    after = read_mesh(path)
-    np.testing.assert_array_equal(after.vertices, before.vertices)
-    np.testing.assert_array_equal(after.faces, before.faces)
-    assert path.read_bytes().startswith(b"ply\nformat ascii")
+    before = path.read_bytes()
+    rc, _, err = run(capsys, "convert", path, path, "--ascii")
+    assert rc == 2 and "never writes over its inputs" in err and len(err.strip().splitlines()) == 1
+    assert path.read_bytes() == before
 
 
 def test_interrupted_convert_leaves_input_and_output_untouched(tmp_path, capsys, monkeypatch):

@@ -112,7 +112,7 @@ def test_obj_vertex_colours(tmp_path):
 @pytest.mark.parametrize("text, message", [
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "not an integer"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "indices start at 1"),
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "refers to vertex 3"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "refers to vertex 4, but the file has 3 vertices"),
     ("hello world\n", "line 1 is not OBJ"),
     ("f 1 2 3\n", "no vertex"),
 ])

@@ -86,7 +86,7 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator:
 
 # ---- the output folder ----------------------------------------------------------------
 
-def _read_manifest(folder: Path) -> dict[str, int] | None:
+def read_manifest(folder: Path) -> dict[str, int] | None:
     """``{relative posix path: size}`` from the folder's manifest, or None when absent or unreadable."""
     try:
         data = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
@@ -100,6 +100,14 @@ def _read_manifest(folder: Path) -> dict[str, int] | None:
         return {str(k): int(v) for k, v in files.items()}
     except (OSError, ValueError, KeyError, TypeError, RecursionError):
         return None
+
+
+def write_manifest(folder: Path, files: dict[str, int]) -> None:
+    """Write ``folder``'s manifest (atomically): ``files`` maps each file this run wrote,
+    as a path relative to ``folder`` (posix), to its size in bytes."""
+    with atomic_open(folder / MANIFEST, "w", encoding="utf-8") as handle:
+        json.dump({"format": "nurbskit-output", "version": 1, "files": files}, handle, indent=1)
+        handle.write("\n")
 
 
 def _pid_alive(pid: int) -> bool:
@@ -198,7 +206,7 @@ def check_output_dir(path: str | os.PathLike, overwrite: bool = False, *,
             break
     if not path.is_dir():
         return path
-    manifest = _read_manifest(folder)
+    manifest = read_manifest(folder)
     if not any(not _is_partial(e.name) for e in folder.iterdir()):  # staging folders aside
         return path
     foreign = _foreign(folder, manifest)
@@ -233,7 +241,7 @@ def _folder_lock(folder: Path) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _interrupts_held() -> Iterator[None]:
+def interrupts_held() -> Iterator[None]:
     """Hold Ctrl-C and SIGTERM back for the duration (main thread only); deliver them afterwards.
 
     The final move of a run's files takes milliseconds; a signal in the middle of it would
@@ -262,13 +270,13 @@ def _interrupts_held() -> Iterator[None]:
 
 def _commit(staging: Path, folder: Path, overwrite: bool, inputs, option: str) -> list[str]:
     """Move the staged files into ``folder`` in place of the previous run's; write the manifest."""
-    with _folder_lock(folder), _interrupts_held():
+    with _folder_lock(folder), interrupts_held():
         # Checked again under the lock: another run may have written here since the start.
         try:
             check_output_dir(folder, overwrite, inputs=inputs, option=option)
         except OptionError as exc:
             raise OptionError(f"{exc} (written by another run while this one worked)") from None
-        old = _read_manifest(folder) or {}
+        old = read_manifest(folder) or {}
         new = {}
         for root, _, files in os.walk(staging):
             for f in files:
@@ -288,9 +296,7 @@ def _commit(staging: Path, folder: Path, overwrite: bool, inputs, option: str) -
             target = folder / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             os.replace(staging / rel, target)
-        with atomic_open(folder / MANIFEST, "w", encoding="utf-8") as handle:
-            json.dump({"format": "nurbskit-output", "version": 1, "files": new}, handle, indent=1)
-            handle.write("\n")
+        write_manifest(folder, new)
     return sorted(new)
 
 

@@ -9,8 +9,9 @@ from collections import Counter
 from pathlib import Path
 from typing import Iterable
 
-from ..errors import InputError
+from ..errors import InputError, OptionError
 from .commands import BatchCommand, Item
+from .summary import SUMMARY_FILES
 
 _GLOB = re.compile(r"[*?\[]")
 
@@ -20,7 +21,8 @@ def expand_inputs(inputs: Iterable[str | os.PathLike], command: BatchCommand,
     """Input files, in the order given; folders searched (recursively) by extension.
 
     A pattern with ``*``, ``?`` or ``[`` is expanded as a glob (``**`` recurses); a
-    pattern or folder that matches nothing is an error, as is a missing file. Each file
+    pattern or folder that matches nothing is an error, as is a missing file, and a folder
+    that is ``exclude`` itself (``--out`` equal to an input folder). Each file
     appears once, at its first mention. Folder searches skip hidden entries and the
     folder ``exclude`` (the batch's own output: its ``points.off`` are no inputs).
     """
@@ -49,6 +51,9 @@ def expand_inputs(inputs: Iterable[str | os.PathLike], command: BatchCommand,
                     add(path)
             continue
         path = Path(text)
+        if path.is_dir() and path.resolve() == skip:
+            raise OptionError(f"--out {exclude}: expected a folder apart from the inputs, found the input folder "
+                              f"{path} itself; choose another output folder")
         if path.is_dir():
             files = _search(path, command, skip)
             if not files:
@@ -80,8 +85,8 @@ def _search(folder: Path, command: BatchCommand, skip: Path | None = None) -> li
     return files
 
 
-# Names of the batchs own files in DIR: no item folder may take them.
-RESERVED = {"summary.csv", "summary.json", "summary.png"}
+# Names of the batch's own files in DIR: no item folder may take them.
+RESERVED = set(SUMMARY_FILES)
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
 
 

@@ -7,10 +7,19 @@ command's headline metrics. The aggregate row (``input`` = ``ALL``) counts ok an
 items, sums the seconds and gives the mean of each metric over the ok items; a metric
 whose values are strings (a label: ``shape``'s ``kind``) is counted per value instead
 (``"revolution: 3, extrusion: 1"``). Every file is written atomically.
+
+Convention (the summary files in ``DIR``):
+    ``DIR`` holds the item folders and the summary, so it is no output folder of
+    :func:`nurbskit._fs.output_directory`; the batch marks its summary files as its own
+    in ``DIR/.nurbskit-manifest.json`` (the manifest of :mod:`nurbskit._fs`: names and
+    sizes). A summary file that is not listed there, or has changed size since, is the
+    user's: :func:`check_summary_files` refuses the run before any work, whatever the
+    flags, as ``output_directory`` refuses a folder holding files nurbskit did not write.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -19,9 +28,11 @@ from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from .._fs import atomic_open
+from .._fs import MANIFEST, atomic_open, interrupts_held, read_manifest, write_manifest
+from ..errors import OptionError
 
 BASE_COLUMNS = ("input", "name", "status", "error", "seconds", "resumed")
+SUMMARY_FILES = ("summary.csv", "summary.json", "summary.png")
 
 
 def metric_names(records: Sequence[dict]) -> list[str]:
@@ -76,23 +87,68 @@ def _json_safe(value):
     return value
 
 
+def check_summary_files(out: str | os.PathLike) -> None:
+    """Refuse ``out`` when it holds a summary file that no batch wrote (see the Convention).
+
+    Raises OptionError (one line naming ``--out``, the files and why). Creates nothing.
+    """
+    out = Path(out)
+    listed = (read_manifest(out.resolve()) or {}) if out.is_dir() else {}
+    foreign = []
+    for name in SUMMARY_FILES:
+        path = out / name
+        if not (path.exists() or path.is_symlink()):
+            continue
+        if name not in listed or path.is_symlink() or not path.is_file():
+            foreign.append(f"{name} (not in its {MANIFEST})")
+        elif path.stat().st_size != listed[name]:
+            foreign.append(f"{name} (changed since nurbskit batch wrote it)")
+    if foreign:
+        raise OptionError(
+            f"--out {out}: the folder holds {', '.join(foreign)}; nurbskit batch replaces only summary files "
+            "it wrote, even with --resume or --overwrite: move them or choose another folder"
+        )
+
+
+def _record_summary_files(out: Path, written: Sequence[Path]) -> None:
+    """List ``written`` in ``out``'s manifest in place of the previous summary files (the
+    manifest's other entries are kept); a summary file of an earlier batch that this run
+    did not write again (``summary.png`` after an interrupt) is removed, as
+    :func:`nurbskit._fs.output_directory` removes an earlier run's files."""
+    old = read_manifest(out.resolve()) or {}
+    names = {p.name for p in written}
+    for name in SUMMARY_FILES:
+        if name in old and name not in names:
+            with contextlib.suppress(FileNotFoundError):
+                (out / name).unlink()
+    files = {k: v for k, v in old.items() if k not in SUMMARY_FILES}
+    files.update({p.name: p.stat().st_size for p in written})
+    write_manifest(out, files)
+
+
 def write_summary(out: str | os.PathLike, records: Sequence[dict], meta: dict, *, figure: bool = True) -> list[Path]:
-    """Write the summary files into ``out``; returns their paths."""
+    """Write the summary files into ``out`` and list them in its manifest; returns their paths.
+
+    Call :func:`check_summary_files` first, before any work: this replaces the files.
+    Ctrl-C waits until the files and the manifest agree (a second at most, for the figure).
+    """
     out = Path(out)
     rows = flat_rows(records)
     total = aggregate(records)
     columns = [*BASE_COLUMNS, *metric_names(records)]
-    with atomic_open(out / "summary.csv", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
-        writer.writeheader()
-        for row in [*rows, total]:
-            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
-    with atomic_open(out / "summary.json", encoding="utf-8") as handle:
-        json.dump(_json_safe({**meta, "aggregate": total, "rows": rows}), handle, indent=1)
-        handle.write("\n")
-    paths = [out / "summary.csv", out / "summary.json"]
-    if figure:
-        paths.append(plot_summary(records, out / "summary.png", title=f"nurbskit batch {meta.get('command', '')}"))
+    with interrupts_held():
+        with atomic_open(out / "summary.csv", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
+            writer.writeheader()
+            for row in [*rows, total]:
+                writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+        with atomic_open(out / "summary.json", encoding="utf-8") as handle:
+            json.dump(_json_safe({**meta, "aggregate": total, "rows": rows}), handle, indent=1)
+            handle.write("\n")
+        paths = [out / "summary.csv", out / "summary.json"]
+        if figure:
+            paths.append(plot_summary(records, out / "summary.png", title=f"nurbskit batch {meta.get('command', '')}"))
+        _record_summary_files(out, paths)
     return paths
 
 

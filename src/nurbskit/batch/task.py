@@ -21,12 +21,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import ctypes
+import gc
 import importlib
 import io
 import json
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 from functools import lru_cache
@@ -143,52 +145,166 @@ def _raise_in_thread(thread_id: int, exc_type) -> None:
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id), ctypes.py_object(exc_type) if exc_type else None)
 
 
-@contextlib.contextmanager
-def deadline(seconds: float | None, key: str = ""):
-    """Raise :class:`TaskTimeout` in this thread once ``seconds`` have passed.
+# The deadlines running now, by thread; the unraisable hook and the paused collector they share.
+_running: dict[int, "Deadline"] = {}
+_running_lock = threading.RLock()
+_previous_hook = None
+_gc_pauses = 0
+_gc_was_enabled = True
 
-    The exception is delivered between two Python bytecodes of the running thread
-    (``PyThreadState_SetAsyncExc``): the fitting loops return to Python at every
-    iteration, so it lands within one iteration. If the thread is still busy
-    ``max(10 s, seconds / 2)`` later (stuck inside one long native call), the worker
-    process ends itself, after logging a ``nurbskit-batch-timeout`` event that the
-    batch reads to report the timeout; the nanny starts a fresh worker.
-    """
-    if not seconds:
-        yield
+
+def _on_unraisable(unraisable) -> None:
+    """``sys.unraisablehook`` while a deadline runs: a TaskTimeout that Python could not
+    raise (it landed in a garbage-collector callback, such as Dask's GC diagnosis in every
+    worker, or in a ``__del__``) is delivered again, not printed; anything else is
+    printed as before."""
+    if isinstance(unraisable.exc_value, TaskTimeout):
+        clock = _running.get(threading.get_ident())
+        if clock is not None and clock.expired:
+            clock._wake.set()  # its watchdog delivers it again (from here it would land in this hook)
         return
-    thread_id = threading.get_ident()
-    lock = threading.Lock()
-    state = {"done": False, "fired": False}
-    stop = threading.Event()
+    (_previous_hook or sys.__unraisablehook__)(unraisable)
 
-    def watchdog():
-        if stop.wait(seconds):
+
+def _in_gc_callback(thread_id: int) -> bool:
+    """Whether the thread is running one of ``gc.callbacks`` now."""
+    codes = {getattr(getattr(cb, "__func__", cb), "__code__", None) for cb in gc.callbacks}
+    frame = sys._current_frames().get(thread_id)
+    while frame is not None:
+        if frame.f_code in codes:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _pause_gc(pause: bool) -> None:
+    """Pause automatic garbage collection while a TaskTimeout is on its way (one counter for
+    every deadline of the process): its callbacks run Python code that would swallow it."""
+    global _gc_pauses, _gc_was_enabled
+    with _running_lock:
+        if pause:
+            if _gc_pauses == 0:
+                _gc_was_enabled = gc.isenabled()
+                gc.disable()
+            _gc_pauses += 1
+        else:
+            _gc_pauses -= 1
+            if _gc_pauses == 0 and _gc_was_enabled:
+                gc.enable()
+
+
+class Deadline:
+    """Raise :class:`TaskTimeout` in the thread that enters it once ``seconds`` have passed.
+
+    Convention (how a timeout reaches the task):
+        The exception is delivered between two Python bytecodes of the running thread
+        (``PyThreadState_SetAsyncExc``): the fitting loops return to Python at every
+        iteration, so it lands within one iteration. Where Python cannot raise it (a
+        garbage-collector callback, a ``__del__``: "Exception ignored in ...") it is
+        delivered again and nothing is printed; the collector pauses until the task has
+        stopped. Whether or not the exception arrived, :meth:`finish` raises it once the
+        time has run out, so a task never ends ``ok`` after its deadline. If the thread is
+        still busy ``max(10 s, seconds / 2)`` later (stuck inside one long native call, or
+        the exception swallowed by an ``except BaseException``), the worker process ends
+        itself, after logging a ``nurbskit-batch-timeout`` event that the batch reads to
+        report the timeout; the nanny starts a fresh worker.
+
+    ``seconds`` None or 0: no deadline. ``expired`` tells whether the time ran out.
+
+    Example:
+        >>> with Deadline(600) as clock:  # doctest: +SKIP
+        ...     fit(...)
+        ...     clock.finish()  # TaskTimeout if the 600 s have passed; from here on, never
+    """
+
+    def __init__(self, seconds: float | None, key: str = ""):
+        self.seconds, self.key = seconds, key
+        self.expired = False
+        self._done = self._ended = self._gc_resumed = False
+        self._lock = threading.Lock()  # between the task thread (close) and its watchdog (expiry, delivery)
+        self._wake = threading.Event()  # set by close(), and by the hook when the exception was swallowed
+        self._thread_id = threading.get_ident()
+
+    def __enter__(self) -> "Deadline":
+        global _previous_hook
+        if self.seconds:
+            self._thread_id = threading.get_ident()
+            with _running_lock:
+                if not _running and sys.unraisablehook is not _on_unraisable:
+                    _previous_hook, sys.unraisablehook = sys.unraisablehook, _on_unraisable
+                _running[self._thread_id] = self
+            threading.Thread(target=self._watch, name="nurbskit-batch-deadline", daemon=True).start()
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def finish(self) -> None:
+        """Stop the clock: raise TaskTimeout when the time has run out, else never from now on."""
+        self.close()
+        if self.expired:
+            raise TaskTimeout
+
+    def close(self) -> None:
+        """Stop the clock; idempotent, and safe against the TaskTimeout landing inside it."""
+        global _previous_hook
+        if not self.seconds or self._ended:
             return
-        with lock:
-            if state["done"]:
+        while True:
+            try:
+                with self._lock:
+                    self._done = True  # the watchdog and the hook deliver nothing from now on
+                    if self.expired and not self._gc_resumed:
+                        _raise_in_thread(self._thread_id, None)  # clear one not delivered yet
+                        _pause_gc(False)
+                        self._gc_resumed = True
+                break
+            except TaskTimeout:  # the pending one arrived just here: nothing is pending now
+                continue
+        self._wake.set()
+        with _running_lock:
+            _running.pop(self._thread_id, None)
+            if not _running and sys.unraisablehook is _on_unraisable:
+                sys.unraisablehook, _previous_hook = _previous_hook, None
+        self._ended = True
+
+    def _watch(self) -> None:
+        if self._wake.wait(self.seconds):
+            return  # closed in time
+        with self._lock:
+            if self._done:
                 return
-            state["fired"] = True
-            _raise_in_thread(thread_id, TaskTimeout)
-        if stop.wait(max(10.0, seconds / 2)):
-            return
+            self.expired = True
+            _pause_gc(True)
+            self._wake.clear()
+        kill_at = time.monotonic() + max(10.0, self.seconds / 2)
+        self._deliver(kill_at)
+        while self._wake.wait(max(0.0, kill_at - time.monotonic())):  # closed, or the exception swallowed
+            self._wake.clear()
+            if not self._deliver(kill_at):
+                return
+
+    def _deliver(self, until: float) -> bool:
+        """Raise TaskTimeout in the task's thread, once it is out of any garbage-collector
+        callback (polled each millisecond, up to ``until``); False when closed meanwhile."""
+        while True:
+            with self._lock:
+                if self._done:
+                    return False
+                if time.monotonic() >= until or not _in_gc_callback(self._thread_id):
+                    _raise_in_thread(self._thread_id, TaskTimeout)
+                    return True
+            time.sleep(0.001)
+        with self._lock:
+            if self._done:
+                return
         with contextlib.suppress(Exception):
             from distributed import get_worker
 
-            get_worker().log_event("nurbskit-batch-timeout", {"key": key, "seconds": seconds})
+            get_worker().log_event("nurbskit-batch-timeout", {"key": self.key, "seconds": self.seconds})
             time.sleep(1.0)  # let the event reach the scheduler
         os.kill(os.getpid(), signal.SIGKILL)
-
-    guard = threading.Thread(target=watchdog, name="nurbskit-batch-deadline", daemon=True)
-    guard.start()
-    try:
-        yield
-    finally:
-        with lock:
-            state["done"] = True
-            if state["fired"]:
-                _raise_in_thread(thread_id, None)  # clear an exception not delivered yet
-        stop.set()
 
 
 @contextlib.contextmanager
@@ -215,15 +331,16 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
     time), ``cpu_seconds`` (the CPU time of the worker process meanwhile: with one item
     per process, the item's), ``metrics`` (the command's headline numbers), ``worker``
     (host:pid).
-    ``task_key`` names the task in the timeout event (see :func:`deadline`).
+    ``task_key`` names the task in the timeout event (see :class:`Deadline`).
     """
     out_root_path = Path(out_root)
     out_dir = out_root_path / item.name
     start, cpu_start = time.perf_counter(), time.process_time()
     record = {"name": item.name, "input": item.source, "status": "failed", "error": "", "seconds": 0.0,
               "cpu_seconds": 0.0, "metrics": {}, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    clock = Deadline(timeout, task_key)
     try:
-        with deadline(timeout, task_key):
+        with clock:
             _forget_marker(out_dir)
             args = command_args(command, item, out_dir, options)
             stdout, stderr = io.StringIO(), io.StringIO()
@@ -233,6 +350,7 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
                 raise _CommandFailed(one_line(stderr.getvalue(), last=True) or f"{command.name} exited with status {code}")
             with open(out_dir / command.report, encoding="utf-8") as handle:
                 metrics = command.metrics(json.load(handle))
+            clock.finish()  # past --timeout is a failure, even when the exception never arrived
         done = {**record, "status": "ok", "metrics": metrics, "seconds": time.perf_counter() - start,
                 "cpu_seconds": time.process_time() - cpu_start}
         marker = {"version": MARKER_VERSION, "command": command.name, "options": list(options),
@@ -241,13 +359,17 @@ def run_item(item: Item, task_key: str = "", *, command: BatchCommand, out_root:
             json.dump(marker, handle, indent=1)
         record = done  # ok only once the marker is written
     except TaskTimeout:
-        record["error"] = f"timed out after {timeout:g} s (--timeout)"
+        pass  # said below
     except _CommandFailed as exc:
         record["error"] = str(exc)
     except SystemExit as exc:  # a command that calls sys.exit must not end the worker
         record["error"] = f"{command.name} exited with status {exc.code}"
     except Exception as exc:  # noqa: BLE001 - any failure of one item is recorded, never raised
         record["error"] = describe_error(exc)
+    finally:
+        clock.close()  # already closed, unless the TaskTimeout landed in the deadline's own exit
+    if clock.expired:  # whatever the command made of the TaskTimeout (a status, another exception)
+        record["error"] = f"timed out after {timeout:g} s (--timeout)"
     record["seconds"] = time.perf_counter() - start
     record["cpu_seconds"] = time.process_time() - cpu_start
     return record

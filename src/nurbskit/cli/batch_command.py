@@ -54,13 +54,14 @@ def _add_options(p, suppress: bool) -> None:
     p.add_argument("--threads-per-worker", type=_int(1), metavar="T", default=d(1),
                    help="torch threads of each item; a local worker runs one item at a time (default 1)")
     p.add_argument("--memory-limit", metavar="SIZE", default=d("4GB"),
-                   help="memory of each local worker; a worker past 95%% of it is restarted and its item "
-                        "recorded as failed (default 4GB; 'auto': the machine's memory / workers)")
+                   help="memory of each local worker, at least 512MiB; a worker past 95%% of it is restarted and "
+                        "its item recorded as failed (default 4GB; 'auto': the machine's memory / workers)")
     p.add_argument("--scheduler", metavar="ADDRESS", default=d(None),
-                   help="use the Dask cluster at this scheduler (tcp://HOST:PORT) instead of a local one")
+                   help="use the Dask cluster at this scheduler (tcp://HOST:PORT) instead of a local one; "
+                        "one that does not answer within 20 s fails the run before anything is written")
     p.add_argument("--retries", type=_int(0), metavar="N", default=d(1),
                    help="times an item whose worker died is tried again on the local cluster (default 1)")
-    p.add_argument("--timeout", type=_seconds, metavar="S", default=d(None), help="seconds allowed per item (default: none)")
+    p.add_argument("--timeout", type=_seconds, metavar="S", default=d(None), help="seconds allowed per item; an item past it is recorded as failed (default: none)")
     p.add_argument("--resume", action="store_true", default=d(False),
                    help="skip inputs whose output is complete (their folders are not touched); run the rest")
     p.add_argument("--overwrite", action="store_true", default=d(False), help="run every input again, replacing its folder")

@@ -9,6 +9,7 @@ Examples::
     nurbskit export vol/mesh.obj vol.step                # a closed mesh: a solid of triangles
     nurbskit export vase/report.json vase.step           # `nurbskit shape`: SURFACE_OF_REVOLUTION
     nurbskit export vase vase.step --bspline             # (its folder works too) as the exact NURBS
+    nurbskit export fit fit.step                         # an output folder: its patches.json, surface.json or volume.json
 
 Inputs: nurbskit JSON (one object, ``{"patches": [...]}`` or ``{"surfaces": [...]}``),
 ``.3dm``, STEP, IGES, BREP, the other NURBS files of ``nurbskit convert``, triangle
@@ -29,7 +30,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..errors import OptionError
+from ._options import number_in
 
 FORMAT_CHOICES = ("step", "iges", "brep", "3dm", "obj", "ply", "stl", "gltf")
 
@@ -45,7 +46,7 @@ def register(subparsers) -> None:
     p.add_argument("output", metavar="OUTPUT", help="file to write")
     p.add_argument("--format", choices=FORMAT_CHOICES + ("json", "glb", "off"), default=None,
                    help="output format (default: OUTPUT's extension)")
-    p.add_argument("--tolerance", type=float, default=None,
+    p.add_argument("--tolerance", type=float, default=None, metavar="T",
                    help="tessellation: largest distance from a triangle to the surface, in model units "
                         "(default 1e-3 of the bounding-box diagonal)")
     p.add_argument("--bspline", action="store_true",
@@ -61,25 +62,35 @@ def add_format_option(parser) -> None:
     (not ``--tolerance``: the fitting commands use that name for their stopping rule)."""
     parser.add_argument("--format", dest="export_format", choices=FORMAT_CHOICES, default=None,
                         help="also write the result in this format (CAD files are read back and checked)")
-    parser.add_argument("--mesh-tolerance", dest="export_tolerance", type=float, default=None,
+    parser.add_argument("--mesh-tolerance", dest="export_tolerance", type=number_in(0, low_open=True), default=None,
+                        metavar="T",
                         help="with --format obj/ply/stl/gltf: tessellation tolerance in model units "
                              "(default 1e-3 of the bounding-box diagonal)")
+
+
+def check_format_options(args) -> None:
+    """Check ``--mesh-tolerance`` (see :func:`add_format_option`) before a command's work
+    starts: one line naming the option when it is not a tolerance OpenCASCADE can mesh to.
+    (Whether the mesh fits in memory depends on the result: checked when it is written.)"""
+    from ..io.cad.exchange import check_tolerance
+
+    check_tolerance(getattr(args, "export_tolerance", None), "--mesh-tolerance")
 
 
 def write_requested_format(args, obj, folder, stem: str) -> None:
     """With ``--format F`` (see :func:`add_format_option`), write ``obj`` as ``folder/stem.F``."""
     if args.export_format:
         write_result(obj, Path(folder) / f"{stem}.{args.export_format}", format=args.export_format,
-                     tolerance=args.export_tolerance)
+                     tolerance=args.export_tolerance, tolerance_option="--mesh-tolerance")
 
 
-def write_result(obj, path, format: str | None = None, tolerance: float | None = None, **kwargs) -> dict:
-    """Write a result in any format (see :func:`nurbskit.io.cad.write_result`)."""
+def write_result(obj, path, format: str | None = None, tolerance: float | None = None, *,
+                 tolerance_option: str = "--mesh-tolerance", **kwargs) -> dict:
+    """Write a result in any format (see :func:`nurbskit.io.cad.write_result`); messages about
+    ``tolerance`` name ``tolerance_option``."""
     from ..io.cad import write_result as _write
 
-    if tolerance is not None and not tolerance > 0:
-        raise OptionError(f"--tolerance must be positive, got {tolerance}")
-    return _write(obj, path, format=format, tolerance=tolerance, **kwargs)
+    return _write(obj, path, format=format, tolerance=tolerance, tolerance_option=tolerance_option, **kwargs)
 
 
 def run_export(args) -> int:
@@ -100,4 +111,4 @@ def run_export(args) -> int:
     return 0
 
 
-__all__ = ["register", "run_export", "add_format_option", "write_result", "FORMAT_CHOICES"]
+__all__ = ["register", "run_export", "add_format_option", "check_format_options", "write_result", "FORMAT_CHOICES"]

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import InputError, OptionError
 from ..fit.config import CLOSED, INIT_KINDS, LAPLACIAN_ON, LR_RANGE, MAX_ITERS, FitConfig, InitConfig, LossWeights
 from ._options import add_device_options, device_and_dtype, int_in, number_in
-from .export_command import add_format_option, write_requested_format
+from .export_command import add_format_option, check_format_options, write_requested_format
 
 
 def _help(cls, name: str) -> str:
@@ -126,6 +126,7 @@ def run_fit(args) -> int:
 
     from ..fit.checks import check_resolution
 
+    check_format_options(args)  # --mesh-tolerance, before any work
     resolution = parse_pair(args.resolution, "resolution", 2)
     ctrl = parse_pair(args.ctrl, "ctrl", 2) if args.ctrl else None
     degree = parse_pair(args.degree, "degree", 1) if args.degree else None

@@ -7,8 +7,9 @@ Examples::
     nurbskit convert duck1.ctrlpts duck1.json --sizes 14 13 --degrees 3 3
     nurbskit sample bunny.obj -n 100000 --method poisson --seed 0 -o bunny_100k.ply
 
-Every output is written atomically (temporary file, then rename), so converting a
-file onto itself or pressing Ctrl-C never leaves a damaged or half-written file.
+Every output is written atomically (temporary file, then rename), so pressing Ctrl-C
+never leaves a damaged or half-written file; an output that is one of the inputs is
+refused (``io._base.check_not_input``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, OptionError
+from ._options import int_in
 
 
 def register(subparsers) -> None:
@@ -51,7 +53,8 @@ def register(subparsers) -> None:
     p.add_argument("-n", type=int, default=None, help="number of points (meshes: required; NURBS: about n, on a grid)")
     p.add_argument("--method", choices=("poisson", "uniform"), default="poisson",
                    help="poisson: blue noise, well spread (default); uniform: independent, area-weighted")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: fresh entropy)")
+    p.add_argument("--seed", type=int_in(0), default=None, metavar="SEED",
+                   help="random seed, a non-negative integer (default: fresh entropy)")
     p.add_argument("--grid", type=int, nargs="+", metavar="R", help="NURBS: samples per parametric direction")
     p.add_argument("-o", "--output", required=True, help="point file to write (.ply, .xyz, .pcd, .npy, ...)")
     p.add_argument("--no-normals", action="store_true", help="do not write the normal of each sample")
@@ -197,17 +200,34 @@ def _note(command: str, left_out: list[str], out: Path) -> None:
                          f"{', '.join(left_out)}; left out of {out}\n")
 
 
+def _inputs(args, src) -> list:
+    """Every file a command reads: ``src``, and for control-point files the weights and side
+    JSON given or found beside it (see :func:`nurbskit.io.read_nurbs`)."""
+    src = Path(src)
+    found = [src, getattr(args, "weights", None), getattr(args, "meta", None)]
+    if src.suffix.lower() in (".ctrlpts", ".cptw"):
+        found += [p for p in (src.with_suffix(".weights"), src.with_name(src.name + ".json")) if p.is_file()]
+    return found
+
+
 def run_convert(args) -> int:
     from ..io import formats
     from ..io.mesh import write_mesh
     from ..io.nurbs import is_nurbs_file, read_nurbs, write_nurbs
     from ..io.points import write_points
 
+    from ..io._base import check_not_input
+
     src, out = Path(args.input), Path(args.output)
     formats.check_readable(src)
     out_ext = out.suffix.lower()
     if out.is_dir():
         raise OptionError(f"{out}: is a directory, expected an output file name")
+    # write_nurbs puts a .weights file and a side JSON beside a .ctrlpts / .cptw output
+    outputs = [out] + ([out.with_suffix(".weights"), out.with_name(out.name + ".json")]
+                       if out_ext in (".ctrlpts", ".cptw") else [])
+    for written in outputs:
+        check_not_input(written, _inputs(args, src))
     with _progress(2, "convert") as bar:
         if is_nurbs_file(src):
             obj = read_nurbs(src, **_nurbs_kwargs(args))
@@ -259,13 +279,13 @@ def run_sample(args) -> int:
     from ..io.mesh import read_mesh
     from ..io.points import write_points
 
+    from ..io._base import check_not_input
     from ..io.nurbs import is_nurbs_file
 
     if args.n is not None and args.n < 1:
         raise OptionError(f"-n must be a positive integer, got {args.n}")
     out = Path(args.output)
-    if out.exists() and Path(args.mesh).exists() and out.resolve() == Path(args.mesh).resolve():
-        raise OptionError(f"-o {out}: is the input file; nurbskit never writes over its inputs")
+    check_not_input(out, _inputs(args, args.mesh), "-o")
     if args.n is not None:
         _check_sample_memory(args.n)
     if is_nurbs_file(args.mesh):

@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, OptionError
-from ..patches.config import PatchConfig
-from .export_command import add_format_option, write_requested_format
+from ..patches.config import MAX_SEED, PatchConfig
+from ._options import int_in
+from .export_command import add_format_option, check_format_options, write_requested_format
 
 
 def _help(name: str) -> str:
@@ -50,7 +51,7 @@ def register(subparsers) -> None:
                    help=_help("crease_seam") + " (default 75)")
     p.add_argument("--leftover", type=float, default=0.05, metavar="F",
                    help=_help("leftover") + " (default 0.05)")
-    p.add_argument("--seed", type=int, default=0, help=_help("seed"))
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help=_help("seed"))
     p.add_argument("--device", default="cpu", help=_help("device"))
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     add_format_option(p)
@@ -97,10 +98,10 @@ def run_patches(args) -> int:
     from ..patches import fit_patches
     from ..patches.outputs import write_patch_outputs
     from ..patches.planar import read_vg
-
-    weights = parse_weights(args.weights)
     from ._options import parse_device
 
+    check_format_options(args)  # --mesh-tolerance, before any work
+    weights = parse_weights(args.weights)
     parse_device(args.device)  # the one device parser: a device that exists here, or one line
     cfg = PatchConfig(eps=args.eps, weights=weights, max_ctrl=args.max_ctrl, seed=args.seed, device=args.device,
                       init=args.init, max_points=args.max_points, crease_seam=args.crease_seam,

@@ -18,11 +18,14 @@ The method is :func:`nurbskit.shapes.image.revolve_image`.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, OptionError
+from ..errors import InputError
+from ..shapes.image import PIXEL_SIZE_RANGE
+from ._options import number_in
 
 
 def register(subparsers) -> None:
@@ -38,11 +41,12 @@ def register(subparsers) -> None:
     p.add_argument("--axis", choices=("vertical", "principal"), default="vertical",
                    help="symmetry axis: the best vertical mirror line (default), or the silhouette's principal "
                         "axis (for a tilted object)")
-    p.add_argument("--symmetry-tolerance", type=float, default=0.02, metavar="T",
+    p.add_argument("--symmetry-tolerance", type=number_in(0.0, low_open=True), default=0.02, metavar="T",
                    help="largest RMS distance of the row midpoints from the axis: pixels if >= 1, else that "
                         "fraction of the mean width (default 0.02)")
-    p.add_argument("--pixel-size", type=float, default=1.0, metavar="S",
-                   help="length of one pixel in the surface's units (default 1)")
+    p.add_argument("--pixel-size", type=number_in(*PIXEL_SIZE_RANGE), default=1.0, metavar="S",
+                   help=f"length of one pixel in the surface's units, in [{PIXEL_SIZE_RANGE[0]:g}, "
+                        f"{PIXEL_SIZE_RANGE[1]:g}] (default 1)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(run=run_revolve_image)
@@ -67,6 +71,7 @@ def image_report(res, source: str) -> dict:
         "object_grey": res.levels[0],
         "background_grey": res.levels[1],
         "pixel_size": res.pixel_size,
+        "ignored_objects_px": list(res.ignored_objects),
         "height_px": float(res.points[:, 1].max() - res.points[:, 1].min()),
         "max_radius_px": float(res.points[:, 0].max()),
         "profile": {
@@ -126,10 +131,6 @@ def run_revolve_image(args) -> int:
     from ..core import save
     from ..shapes.image import revolve_image
 
-    if args.symmetry_tolerance <= 0:
-        raise OptionError(f"--symmetry-tolerance must be positive, got {args.symmetry_tolerance}")
-    if args.pixel_size <= 0:
-        raise OptionError(f"--pixel-size must be positive, got {args.pixel_size}")
     check_output_dir(args.out, args.overwrite, inputs=[args.input])
     path = Path(args.input)
     if not path.exists():
@@ -152,4 +153,11 @@ def run_revolve_image(args) -> int:
           f"{res.symmetry_residual:.2f} px RMS, {res.rows.shape[0]} rows, profile of "
           f"{res.profile.control_points.shape[0]} control points ({res.background} background)")
     print(f"wrote {args.out}/: " + ", ".join(files))
+    if res.ignored_objects:
+        n = len(res.ignored_objects)
+        sys.stderr.write(
+            f"nurbskit revolve-image: note: {path}: {n} other object{'s' if n > 1 else ''} "
+            f"({', '.join(map(str, res.ignored_objects))} pixels) ignored; only the largest "
+            f"({int(res.mask.sum())} pixels) was revolved\n"
+        )
     return 0

@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, OptionError
+from ..errors import InputError
+from ..shapes.fit import MAX_ITERATIONS
+from ._options import int_in
 
 POOR_FIT = 5e-3
 """A mean input-to-surface distance above this fraction of the diagonal is reported as poor."""
@@ -43,7 +45,8 @@ def register(subparsers) -> None:
     p.add_argument("--init", choices=("geometric", "network"), default="geometric",
                    help="where the refinement starts: the geometric estimate (default) or the trained "
                         "network's guess (needs the model made by `nurbskit train revolve`)")
-    p.add_argument("--iters", type=int, default=30, metavar="N", help="refinement iterations (L-BFGS; default 30)")
+    p.add_argument("--iters", type=int_in(0, MAX_ITERATIONS), default=30, metavar="N",
+                   help=f"refinement iterations (L-BFGS), in [0, {MAX_ITERATIONS}] (default 30)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -119,8 +122,6 @@ def run_shape(args) -> int:
     from ..metrics import evaluate_fit
     from ..shapes import fit_shape
 
-    if args.iters < 0:
-        raise OptionError(f"--iters must be >= 0, got {args.iters}")
     check_output_dir(args.out, args.overwrite, inputs=[args.input])
     path = Path(args.input)
     if not path.exists():

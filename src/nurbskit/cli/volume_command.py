@@ -16,7 +16,7 @@ import json
 import sys
 
 from ._options import add_config_options, add_device_options, config_from_args, device_and_dtype
-from .export_command import add_format_option, write_requested_format
+from .export_command import add_format_option, check_format_options, write_requested_format
 
 
 def register(subparsers) -> None:
@@ -57,6 +57,7 @@ def run(args) -> int:
     from ..volume.fit import fit_silhouettes
 
     # Every check before any work: the options, the memory they need, the output folder.
+    check_format_options(args)  # --mesh-tolerance, with or without --format
     cfg = config_from_args(args, get_preset(args.preset))
     device, dtype = device_and_dtype(args)
     check_fit_size(cfg, 8 if str(dtype).endswith("64") else 4)

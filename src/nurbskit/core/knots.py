@@ -118,9 +118,9 @@ def validate_knot_vector(knots: Tensor, degree: int, n_ctrl: int, axis: str = ""
         drops = np.nonzero(np.diff(k) < 0)[0]
         if drops.size:
             i = int(drops[0])
-            raise NurbskitError(f"{where}{at} decreases at index {i + 1}: {k[i]!r} > {k[i + 1]!r}")
+            raise NurbskitError(f"{where}{at} decreases at index {i + 1}: {float(k[i])!r} > {float(k[i + 1])!r}")
         if not k[n_ctrl] - k[degree] > knot_tolerance(k, knots.dtype):
-            raise NurbskitError(f"{where}{at} has an empty domain [{k[degree]!r}, {k[n_ctrl]!r}]")
+            raise NurbskitError(f"{where}{at} has an empty domain [{float(k[degree])!r}, {float(k[n_ctrl])!r}]")
 
 
 def span_bounds(knots: Tensor, degree: int, n_ctrl: int) -> tuple[Tensor, Tensor]:

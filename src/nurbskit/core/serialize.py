@@ -49,6 +49,27 @@ def to_dict(obj: TensorSpline) -> dict:
     }
 
 
+def whole_numbers(where, values, what: str) -> list[int]:
+    """``values`` (a number or a list of them, as read from a file) as ints; an InputError
+    naming ``where`` when one is not a whole number (``3.5``, ``"3"``, ``true``).
+
+    Example:
+        >>> whole_numbers("a.json", [3, 3.0], "degrees")
+        [3, 3]
+    """
+    items = [values] if isinstance(values, (int, float, np.integer, np.floating)) else values
+    if not isinstance(items, (list, tuple, np.ndarray)):
+        raise InputError(f"{where}: {what} must be a list of integers, found {type(values).__name__}")
+    out = []
+    for value in items:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value) or float(value) != int(value):
+            shown = value.item() if isinstance(value, np.generic) else value
+            raise InputError(f"{where}: {what} must be integers, found {shown!r}")
+        out.append(int(value))
+    return out
+
+
 def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, source: str = "data") -> TensorSpline:
     """Build a spline from the nurbskit JSON structure (validated)."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
@@ -63,7 +84,7 @@ def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, so
         w = data.get("weights")
         w = None if w is None else torch.as_tensor(np.asarray(w, dtype=np.float64), dtype=dtype, device=device)
         kvs = [torch.as_tensor(np.asarray(k, dtype=np.float64), dtype=dtype, device=device) for k in data["knot_vectors"]]
-        degrees = [int(d) for d in data["degrees"]]
+        degrees = whole_numbers(source, data["degrees"], "degrees")
     except KeyError as exc:
         raise InputError(f"{source}: missing field {exc.args[0]!r}") from None
     except (TypeError, ValueError) as exc:

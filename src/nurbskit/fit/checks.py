@@ -80,10 +80,9 @@ def check_fit_size(cfg: FitConfig, target: Target, *, budget: float | None = Non
     k = n_u * n_v
     m = target.points.shape[0]
     if k > m:
-        side = math.isqrt(m)
         raise OptionError(
             f"ctrl: {n_u}x{n_v} = {k} control points cannot be determined by {m} fitted points; "
-            f"use at most {m} control points, e.g. --ctrl {side}x{side}"
+            + fewer_controls_hint(m, tuple(cfg.degree or (3, 3)), closed_v=cfg.init.closed == "v")
         )
     budget = available_bytes() if budget is None else budget
     res = tuple(cfg.resolution)
@@ -102,6 +101,56 @@ def check_fit_size(cfg: FitConfig, target: Target, *, budget: float | None = Non
         f"a fit with --ctrl {n_u}x{n_v} and --resolution {res[0]}x{res[1]} on {m} points needs about "
         f"{human_bytes(need)} of memory but about {human_bytes(budget)} is available; {fits}"
     )
+
+
+def smallest_net(degree: tuple[int, int], closed_v: bool = False) -> tuple[int, int]:
+    """The fewest control points along u and v that ``degree (p, q)`` allows: ``p + 1``, ``q + 1``
+    (``2 q + 1`` along v for a surface closed in v), as :meth:`FitConfig.validate` requires."""
+    p, q = degree
+    return p + 1, (2 * q + 1 if closed_v else q + 1)
+
+
+def determined_net(m: int, degree: tuple[int, int], closed_v: bool = False) -> tuple[int, int] | None:
+    """The largest control net (as square as ``degree`` allows) that ``m`` fitted points determine
+    (at most one control point per point), or None when even :func:`smallest_net` needs more.
+
+    Example:
+        >>> determined_net(40, (3, 3)), determined_net(10, (3, 3)), determined_net(10, (2, 2))
+        ((6, 6), None, (3, 3))
+    """
+    lo_u, lo_v = smallest_net(degree, closed_v)
+    if lo_u * lo_v > m:
+        return None
+    side = math.isqrt(m)
+    if side >= lo_u and side >= lo_v:
+        return side, side
+    if lo_u > side:
+        return lo_u, m // lo_u
+    return m // lo_v, lo_v
+
+
+def fewer_controls_hint(m: int, degree: tuple[int, int], closed_v: bool = False, *, prefix: str = "") -> str:
+    """What to ask for instead when ``m`` fitted points cannot determine the control net: a
+    ``--ctrl`` that they determine and ``degree`` allows, else a lower ``--degree`` with one, else
+    that no surface is determined (``prefix`` goes before the options, e.g. a command).
+
+    Example:
+        >>> fewer_controls_hint(10, (3, 3))
+        'degree 3x3 needs at least 4x4 = 16 control points; use a lower degree, e.g. --degree 2 --ctrl 3x3'
+    """
+    net = determined_net(m, degree, closed_v)
+    if net is not None:
+        return f"use at most {m} control points, e.g. {prefix}--ctrl {net[0]}x{net[1]}"
+    lo_u, lo_v = smallest_net(degree, closed_v)
+    need = f"degree {degree[0]}x{degree[1]} needs at least {lo_u}x{lo_v} = {lo_u * lo_v} control points"
+    for d in range(max(degree) - 1, 0, -1):
+        lower = (min(degree[0], d), min(degree[1], d))
+        net = determined_net(m, lower, closed_v)
+        if net is not None:
+            shown = str(lower[0]) if lower[0] == lower[1] else f"{lower[0]}x{lower[1]}"
+            return f"{need}; use a lower degree, e.g. {prefix}--degree {shown} --ctrl {net[0]}x{net[1]}"
+    lo_u, lo_v = smallest_net((1, 1), closed_v)
+    return f"{need}, and even degree 1 needs {lo_u * lo_v} points: {m} points are too few for a surface"
 
 
 def grid_bytes(resolution: tuple[int, int], item: int) -> float:

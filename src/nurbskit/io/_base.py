@@ -129,6 +129,32 @@ def check_readable(path: str | os.PathLike) -> Path:
     return path
 
 
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether two paths name one file: equal once resolved (symlinks, ``..``), or, when
+    both exist, the same inode (hard links, bind mounts; ``os.path.samefile``)."""
+    a, b = Path(a), Path(b)
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
+def check_not_input(output: str | os.PathLike, inputs, option: str | None = None) -> None:
+    """Refuse (OptionError, one line naming ``option`` or the output) to write ``output``
+    when it is one of ``inputs`` (None entries skipped): nurbskit never writes over its inputs.
+
+    Example:
+        >>> check_not_input("out.ply", ["scan.ply"])
+    """
+    where = f"{option} {output}" if option else f"{output}"
+    for given in inputs:
+        if given is not None and same_file(output, given):
+            named = "" if Path(given) == Path(output) else f" {given}"
+            raise OptionError(f"{where}: is the input file{named}; nurbskit never writes over its inputs")
+
+
 def read_bytes(path: Path) -> bytes:
     """The whole file, after checking that it fits in memory."""
     check_fits(path, path.stat().st_size, "the file")
@@ -289,17 +315,70 @@ def parse_table(path: Path, block: bytes | Path, rows: int | None, what: str, fi
             warnings.simplefilter("ignore")
             table = np.loadtxt(source, dtype=dtype, ndmin=2, comments=comments, delimiter=delimiter)
     except ValueError as exc:
-        msg = str(exc)
-        # numpy counts rows from 0; comment and blank lines were removed, so say "data line"
-        m = re.search(r"row (\d+)", msg)
-        lineno = f" at data line {first_line + int(m.group(1))}" if m else ""
-        detail = msg.splitlines()[0]
-        raise InputError(f"{path}: {what}: not a table of numbers{lineno} ({detail})") from None
+        raise InputError(_table_error(path, source, what, first_line, delimiter, comments, str(exc))) from None
     except MemoryError:
         raise InputError(f"{path}: {what} do not fit in memory") from None
     if rows is not None and table.shape[0] != rows:
         raise InputError(f"{path}: expected {rows:,} {what}, found {table.shape[0]:,}")
     return table
+
+
+_NUMPY_ROW = re.compile(r"row (\d+)")
+
+
+def _table_error(path: Path, source, what: str, first_line: int, delimiter: str | None, comments: str | None,
+                 numpy_message: str) -> str:
+    """The one-line message for a table numpy could not parse: the first bad line, found again in Python.
+
+    With ``comments`` the text is the file as it is, so the line number is the file's;
+    without, comment and blank lines were removed before, so it counts data lines from
+    ``first_line``. Only reached on failure: the Python loop costs nothing on good files.
+    """
+    if isinstance(source, io.BytesIO):
+        source.seek(0)
+        handle = source
+    else:
+        handle = open(source, "rb")
+    split = (lambda t: [x.strip() for x in t.split(b",")]) if delimiter == "," else bytes.split
+    sep = "commas" if delimiter == "," else "spaces or tabs"
+    label = "line" if comments is not None else "data line"
+    width = first = None
+    try:
+        for number, raw in enumerate(handle, start=1 if comments is not None else first_line):
+            text = raw.split(comments.encode(), 1)[0] if comments is not None else raw
+            text = text.strip()
+            if not text:
+                continue
+            fields = split(text)
+            bad = next((f for f in fields if not _is_number(f)), None)
+            if bad is not None or (width is not None and len(fields) != width):
+                if width is not None and len(fields) != width:
+                    detail = (f"{len(fields)} value{'s' if len(fields) != 1 else ''} separated by {sep}, "
+                              f"where {label} {first} has {width}")
+                else:
+                    detail = f"{bad[:30].decode('utf-8', 'replace')!r} is not a number"
+                mixed = (delimiter == ",") != (b"," in text)
+                hint = "; the file mixes commas and spaces as separators" if mixed else ""
+                shown = text[:60].decode("utf-8", "replace")
+                return f"{path}: {what}: not a table of numbers at {label} {number} ({shown!r}: {detail}{hint})"
+            if width is None:
+                width, first = len(fields), number
+    finally:
+        if handle is not source:
+            handle.close()
+    # numpy saw what the loop above did not (a number Python reads and numpy does not)
+    m = _NUMPY_ROW.search(numpy_message)
+    detail = numpy_message.splitlines()[0].split(";")[0]
+    lineno = f" near data line {first_line + int(m.group(1))}" if m else ""
+    return f"{path}: {what}: not a table of numbers{lineno} ({detail})"
+
+
+def _is_number(token: bytes) -> bool:
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
 
 
 def columns_to_float64(columns) -> np.ndarray:
@@ -331,6 +410,9 @@ def nonfinite_rows(array: np.ndarray) -> np.ndarray:
     return bad
 
 
+_SINGULAR = {"vertices": "vertex", "points": "point", "normals": "normal", "faces": "face", "colors": "color"}
+
+
 def check_finite(path: Path, array: np.ndarray, what: str) -> None:
     """InputError naming the first row with a NaN or infinite value."""
     if array.size == 0:
@@ -339,7 +421,7 @@ def check_finite(path: Path, array: np.ndarray, what: str) -> None:
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise InputError(
-            f"{path}: {what} contain NaN or infinite values (first at {what.rstrip('s')} {row}: "
+            f"{path}: {what} contain NaN or infinite values (first at {_SINGULAR.get(what, what)} {row}: "
             f"{array[row].tolist()})"
         )
 

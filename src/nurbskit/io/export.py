@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import OptionError
+from ..errors import InputError, OptionError
 
 MESH_INPUTS = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
 """Extensions read as triangle meshes (unless the file is a NURBS file of that extension)."""
@@ -36,17 +36,50 @@ def read_exportable(path: str | os.PathLike) -> list:
     return read_objects(path)
 
 
+#: The geometry file of each kind of nurbskit output folder, in the order looked for:
+#: `nurbskit patches` (patches.json), `fit` and `shape` (surface.json), `volume` (volume.json).
+FOLDER_FILES = ("patches.json", "surface.json", "volume.json")
+
+
+def folder_input(folder: Path) -> Path:
+    """The file to export from an output folder of a nurbskit command.
+
+    A `nurbskit shape` folder gives its ``report.json`` (the analytic surface of
+    revolution or extrusion; a free-form result its ``surface.json``); the other commands'
+    folders give the first of :data:`FOLDER_FILES` they hold. Any other folder is an
+    InputError naming the files looked for.
+    """
+    from ._json import load_json
+
+    report = folder / "report.json"
+    if report.is_file():
+        data = load_json(report)
+        if isinstance(data, dict) and data.get("kind") in ("revolution", "extrusion") and "profile" in data:
+            return report
+    for name in FOLDER_FILES:
+        if (folder / name).is_file():
+            return folder / name
+    raise InputError(
+        f"{folder}: a folder was given, holding none of {', '.join(FOLDER_FILES)}; "
+        f"pass the file to export, e.g. {folder / 'surface.json'}"
+    )
+
+
 def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: str | None = None,
-                tolerance: float | None = None, check: bool = True, analytic: bool = True) -> dict:
+                tolerance: float | None = None, check: bool = True, analytic: bool = True,
+                tolerance_option: str = "--tolerance") -> dict:
     """Read ``input`` and write it to ``output`` (format: ``format`` or the extension).
 
     Args:
+        input: a file, or the output folder of a nurbskit command (see :func:`folder_input`).
         tolerance: tessellation tolerance in model units for mesh outputs (default 1e-3
-            of the bounding-box diagonal).
+            of the bounding-box diagonal); refused before any work when the mesh it asks
+            for would not fit in memory.
         check: read CAD files back and check them with OpenCASCADE (a failure raises).
         analytic: a ``nurbskit shape`` result (its ``report.json`` or its folder) goes to
             STEP / IGES / BREP as a surface of revolution or extrusion over the exact
             B-spline profile; False writes the exact NURBS instead.
+        tolerance_option: the name of ``tolerance`` in messages.
 
     Returns:
         The report of :func:`nurbskit.io.cad.write_result` (``format``, ``path``; for CAD
@@ -55,21 +88,22 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
 
     Raises:
         InputError: ``input`` is missing, empty or unreadable. OptionError: a bad
-        ``format``, ``tolerance`` or ``output`` name.
+        ``format``, ``tolerance`` or ``output`` name, or ``output`` is ``input``.
     """
-    from ._base import check_readable
+    from ._base import check_not_input, check_readable
     from .cad import write_result
+    from .cad.exchange import check_tolerance
 
     src = Path(input)
-    if src.is_dir() and (src / "report.json").is_file():  # a `nurbskit shape` folder
-        src = src / "report.json"
+    if src.is_dir():
+        src = folder_input(src)
     src, out = check_readable(src), Path(output)
     if out.is_dir():
         raise OptionError(f"{out}: is a directory, expected an output file name")
-    if tolerance is not None and not tolerance > 0:
-        raise OptionError(f"--tolerance must be positive, got {tolerance}")
+    check_not_input(out, [src])
+    check_tolerance(tolerance, tolerance_option)
     return write_result(read_exportable(src), out, format=format, tolerance=tolerance, check=check,
-                        analytic=analytic)
+                        analytic=analytic, tolerance_option=tolerance_option)
 
 
-__all__ = ["export_file", "read_exportable", "MESH_INPUTS"]
+__all__ = ["export_file", "read_exportable", "folder_input", "MESH_INPUTS", "FOLDER_FILES"]

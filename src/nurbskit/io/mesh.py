@@ -36,7 +36,8 @@ def read_mesh(path: str | os.PathLike, *, format: str | None = None) -> Mesh:
         raise InputError(f"{path}: the file holds no points and no faces")
     if payload.faces is None or payload.faces.shape[0] == 0:
         raise InputError(
-            f"{path}: has {payload.points.shape[0]:,} points and no faces; it is a point cloud (use read_points)"
+            f"{path}: has {payload.points.shape[0]:,} points and no faces; expected a triangle mesh, found a "
+            "point cloud (`nurbskit fit` turns points into a surface)"
         )
     check_finite(path, payload.points, "vertices")
     return Mesh(np.ascontiguousarray(payload.points, dtype=np.float64), payload.faces.astype(np.int64),

@@ -36,7 +36,7 @@ import torch
 
 from .._fs import atomic_open
 from ..core.curve import NURBSCurve
-from ..core.serialize import from_dict, from_geomdl_order, save, to_geomdl_order
+from ..core.serialize import from_dict, from_geomdl_order, save, to_geomdl_order, whole_numbers
 from ..core.spline import TensorSpline
 from ..core.surface import NURBSSurface
 from ..core.volume import NURBSVolume
@@ -162,6 +162,11 @@ def _load_json(path: Path):
     return load_json(path)
 
 
+def _plain(value):
+    """A numpy scalar as the Python number it holds (so that messages show ``-1.0``, not ``np.float64(-1.0)``)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def _read_json(path: Path, fmt: str, index: int) -> TensorSpline:
     data = _load_json(path)
     if isinstance(data, dict) and data.get("format") == "nurbskit" and fmt != "geomdl":
@@ -188,7 +193,7 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
     item = items[index]
     axes = {"curve": [""], "surface": ["_u", "_v"], "volume": ["_u", "_v", "_w"]}[kind]
     try:
-        degrees = [int(item["degree" + a]) for a in axes]
+        degrees = whole_numbers(path, [item["degree" + a] for a in axes], "geomdl JSON degrees")
         knots = [np.asarray(item["knotvector" + a], dtype=np.float64) for a in axes]
         cp = item["control_points"]
         points = np.asarray(cp["points"], dtype=np.float64)
@@ -196,7 +201,7 @@ def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
         if kind == "curve":
             sizes = [points.shape[0]]
         else:
-            sizes = [int(item["size" + a]) for a in axes]
+            sizes = whole_numbers(path, [item["size" + a] for a in axes], "geomdl JSON sizes")
     except KeyError as exc:
         raise InputError(f"{path}: geomdl JSON {kind} lacks the field {exc.args[0]!r}") from None
     except (TypeError, ValueError) as exc:
@@ -253,7 +258,7 @@ def read_weights(path: str | os.PathLike) -> np.ndarray:
         raise InputError(f"{path}: holds no weights")
     if not np.all(np.isfinite(values)) or np.any(values <= 0):
         bad = values[~(np.isfinite(values) & (values > 0))][0]
-        raise InputError(f"{path}: weights must be positive and finite, found {bad!r}")
+        raise InputError(f"{path}: weights must be positive and finite, found {_plain(bad)!r}")
     return values
 
 
@@ -299,11 +304,11 @@ def _resolve(path: Path, options: dict, count: int, default_kind: str | None = N
     if kv is not None:
         kv = [None if k is None else np.asarray(k, dtype=np.float64).ravel() for k in kv]
     degrees = merged.get("degrees")
-    if isinstance(degrees, (int, np.integer)):
-        degrees = [int(degrees)]
+    if degrees is not None:
+        degrees = whole_numbers(path, degrees, "degrees")
     sizes = merged.get("sizes")
-    if isinstance(sizes, (int, np.integer)):
-        sizes = [int(sizes)]
+    if sizes is not None:
+        sizes = whole_numbers(path, sizes, "sizes")
     if degrees is None and kv is not None and all(k is not None for k in kv):
         degrees = [int(np.sum(k == k[0])) - 1 for k in kv]
     if sizes is None and kv is not None and degrees is not None and all(k is not None for k in kv):

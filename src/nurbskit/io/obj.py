@@ -101,14 +101,23 @@ def _faces(path, data, f_lines, nv, vn):
         raise InputError(f"{path}: face ('f') lines are malformed")
     if np.any(v_idx == 0):
         raise InputError(f"{path}: a face refers to vertex 0; OBJ indices start at 1")
+    written = v_idx
+    before = None
     if np.any(v_idx < 0):
         # negative references count back from the vertices defined before that face line
         v_pos = np.array([m.start() for m in _ROWS[b"v"].finditer(data)], dtype=np.int64)
-        f_pos = np.array([m.start() for m in _ROWS[b"f"].finditer(data)], dtype=np.int64)
-        before = np.repeat(np.searchsorted(v_pos, f_pos), counts)
+        before = np.repeat(np.searchsorted(v_pos, _face_positions(data)), counts)
         v_idx = np.where(v_idx < 0, before + v_idx, v_idx - 1)
     else:
         v_idx = v_idx - 1
+    outside = (v_idx < 0) | (v_idx >= nv)
+    if outside.any():
+        corner = int(np.flatnonzero(outside)[0])
+        line = int(np.searchsorted(np.cumsum(counts), corner, side="right"))
+        lineno = data.count(b"\n", 0, int(_face_positions(data)[line])) + 1
+        ref = int(written[corner])
+        have = f"only {int(before[corner])} vertices come before it" if ref < 0 else f"the file has {nv} vertices"
+        raise InputError(f"{path}: line {lineno}: a face refers to vertex {ref}, but {have}")
     tri = fan_triangulate(counts, v_idx)
     normals = None
     if has_refs and vn is not None:
@@ -123,6 +132,11 @@ def _faces(path, data, f_lines, nv, vn):
                     normals = np.zeros((nv, 3))
                     normals[v_idx] = vn[n_idx]
     return tri, normals
+
+
+def _face_positions(data: bytes) -> np.ndarray:
+    """Byte offsets of the face ('f') lines."""
+    return np.array([m.start() for m in _ROWS[b"f"].finditer(data)], dtype=np.int64)
 
 
 def write_obj(path, points, faces=None, normals=None, colors=None, labels=None, *, precision: int = 17) -> list[str]:

@@ -59,6 +59,8 @@ def read_stl(path: str | os.PathLike) -> Payload:
             f"{path}: binary STL header declares {n:,} triangles ({84 + 50 * n:,} bytes) but the file has "
             f"{len(data):,} bytes"
         )
+    if n == 0:
+        raise InputError(f"{path}: the binary STL holds 0 triangles; expected a mesh, found an empty one")
     rec = np.frombuffer(data, _DTYPE, n, 84)
     vertices, faces = merge_corners(rec["corners"])
     return Payload(vertices, faces, info={"format": "stl binary", "triangles": n})

@@ -30,6 +30,7 @@ from ._base import (
     read_bytes,
 )
 
+_BOM = b"\xef\xbb\xbf"
 TEXT_EXTENSIONS = (".xyz", ".txt", ".csv", ".xyzc", ".pts", ".xyzn", ".asc")
 
 
@@ -76,6 +77,13 @@ def read_table(path: Path, *, skip_count_line: bool = False):
         raise InputError(f"{path}: expected a text file of numbers, found binary data")
     if skip_count_line:
         return _read_table_with_count(path)
+    if head.startswith(_BOM):  # Windows editors start UTF-8 text with a byte-order mark
+        body = read_bytes(path)[len(_BOM):]
+        table = parse_table(path, body, None, "point lines", delimiter="," if b"," in _first_line(body) else None,
+                            comments="#")
+        if table.size == 0:
+            raise InputError(f"{path}: the file holds no data lines (only comments or blank lines)")
+        return table
     first = clean_text(head).split(b"\n", 1)[0] if size > len(head) else None
     if first is None:  # small file: clean it all to find the first data line
         body = clean_text(head)
@@ -89,9 +97,15 @@ def read_table(path: Path, *, skip_count_line: bool = False):
     return table
 
 
+def _first_line(body: bytes) -> bytes:
+    """The first data line of raw text (comments and blank lines skipped)."""
+    return clean_text(body[: 1 << 16]).split(b"\n", 1)[0]
+
+
 def _read_table_with_count(path: Path):
     """PTS: an optional first line with the point count, checked against the lines that follow."""
-    body = clean_text(read_bytes(path))
+    data = read_bytes(path)
+    body = clean_text(data[len(_BOM):] if data.startswith(_BOM) else data)
     if not body:
         raise InputError(f"{path}: the file holds no data lines (only comments or blank lines)")
     lines = Lines(body)

@@ -29,7 +29,7 @@ from typing import Any, Callable
 import torch
 from torch import Tensor, nn
 
-from .._fs import MANIFEST, _read_manifest, atomic_open, atomic_path, check_output_dir
+from .._fs import MANIFEST, atomic_open, atomic_path, check_output_dir, read_manifest, write_manifest
 from ..errors import InputError, OptionError
 from .weights import save_weights
 
@@ -93,7 +93,7 @@ def _prepare(out: Path, resume: bool, overwrite: bool) -> dict | None:
             raise InputError(f"{ckpt}: not a nurbskit checkpoint ({type(exc).__name__}: {exc})") from None
     check_output_dir(out, overwrite)
     if out.is_dir():
-        for name in _read_manifest(out.resolve()) or {}:  # only what an earlier run wrote
+        for name in read_manifest(out.resolve()) or {}:  # only what an earlier run wrote
             with contextlib.suppress(FileNotFoundError):
                 (out / name).unlink()
         with contextlib.suppress(FileNotFoundError):
@@ -103,10 +103,7 @@ def _prepare(out: Path, resume: bool, overwrite: bool) -> dict | None:
 
 
 def _write_manifest(out: Path) -> None:
-    files = {name: (out / name).stat().st_size for name in FILES if (out / name).exists()}
-    with atomic_open(out / MANIFEST, "w", encoding="utf-8") as handle:
-        json.dump({"format": "nurbskit-output", "version": 1, "files": files}, handle, indent=1)
-        handle.write("\n")
+    write_manifest(out, {name: (out / name).stat().st_size for name in FILES if (out / name).exists()})
 
 
 def _save_run(out: Path, model: nn.Module, optimizer, run: TrainRun, config: TrainConfig, meta: dict,

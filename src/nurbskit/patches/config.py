@@ -16,6 +16,11 @@ from typing import Any
 
 from ..errors import OptionError
 
+#: Fewest points a multi-patch fit runs on: the input, and the subset of ``max_points``.
+MIN_POINTS = 20
+#: Largest ``seed`` (numpy's generators take any non-negative integer; torch's, as the fit's, below 2**63).
+MAX_SEED = 2**63 - 1
+
 
 def _f(default, help: str):
     return field(default=default, metadata={"help": help})
@@ -111,10 +116,17 @@ class PatchConfig:
         for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction", "crease_angle", "crease_seam"):
             if not getattr(self, name) > 0:
                 raise OptionError(f"{name}: expected a positive number, got {getattr(self, name)!r}")
-        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0), ("max_points", 0)):
+        for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0)):
             v = getattr(self, name)
             if int(v) != v or v < low:
                 raise OptionError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if int(self.max_points) != self.max_points or not (self.max_points == 0 or self.max_points >= MIN_POINTS):
+            raise OptionError(
+                f"max_points: expected 0 (never subsample) or an integer >= {MIN_POINTS} (the fewest points a "
+                f"multi-patch fit runs on), got {self.max_points!r}"
+            )
+        if isinstance(self.seed, bool) or int(self.seed) != self.seed or not 0 <= self.seed <= MAX_SEED:
+            raise OptionError(f"seed: expected an integer in [0, {MAX_SEED}], got {self.seed!r}")
         if not 0 <= self.absorb_held <= 1:
             raise OptionError(f"absorb_held: expected a fraction in [0, 1], got {self.absorb_held!r}")
         if not 0 <= self.leftover <= 1:

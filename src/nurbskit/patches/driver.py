@@ -42,7 +42,7 @@ from ..core import NURBSSurface
 from ..core.trim import TrimmedSurface
 from ..errors import InputError
 from .adjacency import adjacency
-from .config import PatchConfig
+from .config import MIN_POINTS, PatchConfig
 from .energy import Contribution, energy
 from .metrics import patch_metrics
 from .normals import knn_graph, orient_normals, pca_normals
@@ -146,8 +146,8 @@ def _check_points(points) -> np.ndarray:
     x = np.asarray(points, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != 3:
         raise InputError(f"points must have shape (N, 3), got {x.shape}")
-    if len(x) < 20:
-        raise InputError(f"multi-patch fitting needs at least 20 points, got {len(x)}")
+    if len(x) < MIN_POINTS:
+        raise InputError(f"multi-patch fitting needs at least {MIN_POINTS} points, got {len(x)}")
     if not np.isfinite(x).all():
         raise InputError("points contain NaN or infinite values")
     if not np.linalg.norm(x.max(0) - x.min(0)) > 0:

@@ -46,13 +46,15 @@ from .profile import closing_matrix, fit_profile
 Tensor = torch.Tensor
 F64 = torch.float64
 
-__all__ = ["ShapeFit", "fit_shape", "fit_revolution", "fit_extrusion", "KINDS", "PLANE_THICKNESS"]
+__all__ = ["ShapeFit", "fit_shape", "fit_revolution", "fit_extrusion", "KINDS", "PLANE_THICKNESS", "MAX_ITERATIONS"]
 
 KINDS = ("revolution", "extrusion", "auto")
 PLANE_THICKNESS = 1e-3
 """A cloud thinner than this fraction of its extent is a plane: it has no axis."""
 AUTO_TIE = 1e-4
 """``auto``: mean distances (over the diagonal) closer than this are a tie (revolution wins)."""
+MAX_ITERATIONS = 100_000
+"""The most refinement iterations (L-BFGS) a fit takes, as ``nurbskit volume --iters``; ``shape --iters``'s range."""
 
 
 @dataclass
@@ -283,6 +285,11 @@ def _check_init(init: str) -> None:
         raise OptionError(f"init must be one of {', '.join(INITS)}, got {init!r}")
 
 
+def _check_iterations(iterations) -> None:
+    if isinstance(iterations, bool) or int(iterations) != iterations or not 0 <= iterations <= MAX_ITERATIONS:
+        raise OptionError(f"iterations must be an integer in [0, {MAX_ITERATIONS:,}], got {iterations!r}")
+
+
 def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int = 30, k: int = 24,
                    init: str = "geometric") -> ShapeFit:
     """Fit an exact surface of revolution to ``points (N, 3)`` (module docstring).
@@ -294,6 +301,7 @@ def fit_revolution(points, normals=None, *, refine: bool = True, iterations: int
     contract in :mod:`nurbskit.shapes.init`); the refinement is the same.
     """
     _check_init(init)
+    _check_iterations(iterations)
     t0 = time.perf_counter()
     p = _cloud(points)
     _check_not_plane(p, "revolution")
@@ -373,6 +381,7 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
     through ``axis_point`` with the basis :func:`nurbskit.shapes.init.plane_basis`.
     """
     _check_init(init)
+    _check_iterations(iterations)
     t_start = time.perf_counter()
     p = _cloud(points)
     _check_not_plane(p, "extrusion")
@@ -433,7 +442,22 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
 # ---------------------------------------------------------------------------------------
 def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> ShapeFit:
     from ..fit import fit_surface
+    from ..fit.api import DEFAULT_CTRL, DEFAULT_DEGREE, resolve_config
+    from ..fit.checks import fewer_controls_hint
 
+    # The fallback's control net must be determined by the points; say so here, in the
+    # terms of a shape fit (an exact shape instead, or `nurbskit fit` with a coarser net),
+    # not with the fitter's --ctrl, which `shape` does not have.
+    cfg = resolve_config("default", False)
+    (n_u, n_v), degree = cfg.ctrl or DEFAULT_CTRL, cfg.degree or DEFAULT_DEGREE
+    m = min(len(p), cfg.max_points) if cfg.max_points else len(p)
+    if n_u * n_v > m:
+        exact = "" if not candidates else "ask for an exact shape (--kind revolution or --kind extrusion), or "
+        raise InputError(
+            f"{reason.rsplit(';', 1)[0]}; the free-form fallback's {n_u}x{n_v} = {n_u * n_v} control points "
+            f"cannot be determined by {m} points: {exact}fit a free-form surface with a coarser net: "
+            + fewer_controls_hint(m, tuple(degree), prefix="nurbskit fit INPUT ")
+        )
     result = fit_surface(p, "default")
     surface = result.surface.detach().to(F64)
     diag = float((p.amax(0) - p.amin(0)).norm())
@@ -468,6 +492,7 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
     if kind not in KINDS:
         raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     _check_init(init)
+    _check_iterations(iterations)
     opts = dict(refine=refine, iterations=iterations, init=init)
     if kind == "revolution":
         fit = fit_revolution(points, normals, **opts)

@@ -35,7 +35,7 @@ through the origin, ``z = 0`` at the bottom of the silhouette, ``x`` the image's
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -45,10 +45,15 @@ from ..core.curve import NURBSCurve
 from ..core.surface import NURBSSurface
 from ..errors import InputError, OptionError
 
-__all__ = ["ImageRevolution", "revolve_image", "silhouette"]
+__all__ = ["ImageRevolution", "revolve_image", "silhouette", "PIXEL_SIZE_RANGE"]
 
 AXES = ("vertical", "principal")
 MIN_ROWS = 8
+PIXEL_SIZE_RANGE = (1e-50, 1e50)
+"""Accepted ``pixel_size``: any image Pillow opens is under 1e9 pixels a side, so every length of
+the result (sub-pixel edges to the diagonal) and its fourth power (a surface normal's squared
+norm, in shading and export) stay finite, normal float64 numbers: no overflow, no subnormal
+collapse of the profile."""
 
 
 @dataclass
@@ -64,7 +69,9 @@ class ImageRevolution:
     mean distance of the (r, z) pairs to the profile (pixels); ``background``: 'light'
     or 'dark'; ``rotation``: degrees the image was turned (``principal``); ``mask``: the
     silhouette ``(H, W)`` bool of the (turned) image; ``grey``: that image; ``levels``:
-    the object's and the background's grey.
+    the object's and the background's grey; ``ignored_objects``: the sizes in pixels of the
+    other objects in the image (each large enough to read a profile from), largest first: only
+    the largest object is revolved.
     """
 
     surface: NURBSSurface
@@ -83,11 +90,18 @@ class ImageRevolution:
     grey: np.ndarray
     axis_x: float
     z_origin: float
+    ignored_objects: list = field(default_factory=list)
 
 
 def silhouette(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, float, str]:
     """``(mask (H, W) bool, (object grey, background grey), background)`` of a grey image
     in [0, 1] (step 1); the greys are the two classes' medians."""
+    return _silhouette(grey, source)[:3]
+
+
+def _silhouette(grey: np.ndarray, source: str) -> tuple[np.ndarray, tuple, str, list[int]]:
+    """:func:`silhouette` and the sizes (pixels, largest first) of the other objects it left
+    out: components large enough to read a profile from (``4 * MIN_ROWS`` pixels), not specks."""
     from scipy import ndimage
     from skimage.filters import threshold_otsu
     from skimage.measure import label
@@ -105,12 +119,18 @@ def silhouette(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, flo
         raise InputError(f"{source}: no object found after thresholding (the whole image is background)")
     counts = np.bincount(labels.reshape(-1))
     counts[0] = 0
-    mask = ndimage.binary_fill_holes(labels == int(counts.argmax()))
+    largest = int(counts.argmax())
+    mask = ndimage.binary_fill_holes(labels == largest)
     if mask.sum() < 4 * MIN_ROWS:
         raise InputError(f"{source}: the object is too small ({int(mask.sum())} pixels) to read a profile from")
+    # other objects (not inside the filled silhouette, as a hole's contents are)
+    inside = np.unique(labels[mask])
+    others = counts.copy()
+    others[inside] = 0
+    ignored = sorted((int(c) for c in others if c >= 4 * MIN_ROWS), reverse=True)
     # the two greys an anti-aliased edge pixel mixes in proportion to its coverage
     levels = (float(np.median(grey[mask])), float(np.median(grey[~fg])))
-    return mask, levels, background
+    return mask, levels, background, ignored
 
 
 def _edges(grey: np.ndarray, mask: np.ndarray, levels: tuple[float, float], window: int = 2) -> np.ndarray:
@@ -187,8 +207,9 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         raise OptionError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
     if not (symmetry_tolerance > 0 and math.isfinite(symmetry_tolerance)):
         raise OptionError(f"symmetry tolerance must be positive, got {symmetry_tolerance}")
-    if not (pixel_size > 0 and math.isfinite(pixel_size)):
-        raise OptionError(f"pixel size must be positive, got {pixel_size}")
+    low, high = PIXEL_SIZE_RANGE
+    if not (low <= pixel_size <= high):
+        raise OptionError(f"pixel size must be in [{low:g}, {high:g}] (finite, non-degenerate lengths), got {pixel_size}")
     if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__"):
         source = source or str(image)
         grey = read_image(image)
@@ -196,7 +217,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         source = source or "image"
         grey = to_grey(image, source)
     H, W = grey.shape
-    mask, levels, background = silhouette(grey, source)
+    mask, levels, background, ignored = _silhouette(grey, source)
     rotation = 0.0
     if axis == "principal":
         from skimage.transform import rotate
@@ -205,7 +226,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         if abs(rotation) > 1e-9:
             fill = 1.0 if background == "light" else 0.0
             grey = rotate(grey, rotation, resize=True, center=None, order=1, mode="constant", cval=fill)
-            mask, levels, background = silhouette(grey, source)
+            mask, levels, background, ignored = _silhouette(grey, source)
     rows = _edges(grey, mask, levels)
     if rows.shape[0] < MIN_ROWS:
         raise InputError(f"{source}: the silhouette spans {rows.shape[0]} rows; at least {MIN_ROWS} are needed")
@@ -241,7 +262,7 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         surface=surface, profile=curve, axis={"point": point.tolist(), "direction": direction.tolist()},
         rows=rows, points=rz, symmetry_residual=sym_rms, symmetry_max=sym_max,
         profile_residual=prof.residual_mean, background=background, levels=levels, rotation=rotation,
-        pixel_size=pixel_size, mask=mask, grey=grey, axis_x=c, z_origin=z0,
+        pixel_size=pixel_size, mask=mask, grey=grey, axis_x=c, z_origin=z0, ignored_objects=ignored,
     )
 
 

@@ -56,7 +56,9 @@ class VolumeFitConfig:
     degree: int = _f(2, "B-spline degree in every direction (the paper's order 3 = degree 2)", low=1, high=7)
     iterations: int = _f(30, "maximum L-BFGS iterations; it stops earlier when the cost stops changing",
                          low=0, high=100_000, flag="iters")
-    isovalue: float = _f(0.5, "the solid is {f >= isovalue}", low=-1e6, high=1e6)
+    isovalue: float = _f(0.5, "the solid is {f >= isovalue}; the field is fitted to the solid's indicator (0 "
+                         "outside, 1 inside), so 0 or below makes the whole cube solid and above 1 nothing",
+                         low=0.0, high=1.0, low_open=True)
     shape_weight: float = _f(0.1, "weight of the shape cost", low=0.0, high=1e6, low_open=True)
     smooth_weight: float = _f(0.9, "weight of the smoothness cost", low=0.0, high=1e6)
     loss: str = _f("paper", "shape cost: 'paper' (the volume against the visual hull) or 'silhouette' "
@@ -96,8 +98,9 @@ class VolumeFitConfig:
             if f.name in ("control_size", "grid", "mesh_resolution"):
                 if value is None and f.name == "mesh_resolution":
                     continue
-                low = max(meta["low"], self.degree + 1 if f.name == "control_size" and _is_int(self.degree) else 0)
-                setattr(self, f.name, _triple(f.name, value, low, meta["high"]))
+                # One range per field, its metadata's (the option's too); the degree's own
+                # requirement on the control size is a separate check, said as such below.
+                setattr(self, f.name, _triple(f.name, value, meta["low"], meta["high"]))
             elif meta["choices"] is not None:
                 if value not in meta["choices"]:
                     raise OptionError(f"{f.name} must be one of {list(meta['choices'])}, got {value!r}")
@@ -116,6 +119,13 @@ class VolumeFitConfig:
                         + (" (without it nothing ties the solid to the drawings)" if f.name == "shape_weight" else "")
                     )
                 setattr(self, f.name, float(value))
+        if min(self.control_size) < self.degree + 1:
+            high = next(f.metadata["high"] for f in dataclasses.fields(self) if f.name == "control_size")
+            raise OptionError(
+                f"control_size must be one or three integers in [{self.degree + 1}, {high}] with degree "
+                f"{self.degree} (at least degree + 1 per axis), got {self.control_size!r}; raise control_size "
+                "or lower degree"
+            )
         return self
 
     def replace(self, **changes) -> "VolumeFitConfig":

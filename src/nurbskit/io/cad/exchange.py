@@ -491,10 +491,98 @@ def _as_list(obj) -> list:
     return [obj]
 
 
-def tessellate_objects(objects: list, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+#: OpenCASCADE's mesher refuses a chordal tolerance below Precision::Confusion(), 1e-7
+#: model units ("Standard_NumericError ... invalid parameter value").
+MIN_TOLERANCE = 1e-7
+#: Peak memory per output triangle of a tessellated export: OpenCASCADE's mesh, the
+#: arrays read from it and the writer's buffer (measured about 1.5 KB; planned as 2 KB).
+BYTES_PER_TRIANGLE = 2048
+#: Triangles per unit of (integrated maximum curvature / tolerance): fitted to OCC's
+#: counts on the duck (1.8), a bump (0.8) and a cylinder (0.7), rounded up.
+_TRIANGLES_PER_CURVATURE = 2.0
+
+
+def check_tolerance(tolerance, option: str = "tolerance") -> float | None:
+    """``tolerance`` as a float (None passes), or an OptionError naming ``option``:
+    not a number, not finite, not positive, or below :data:`MIN_TOLERANCE`."""
+    if tolerance is None:
+        return None
+    try:
+        value = float(tolerance)
+    except (TypeError, ValueError):
+        raise OptionError(f"{option}: expected a number, got {tolerance!r}") from None
+    if not np.isfinite(value) or value <= 0:
+        raise OptionError(f"{option} must be positive and finite (model units), got {value:g}")
+    if value < MIN_TOLERANCE:
+        raise OptionError(f"{option} {value:g}: OpenCASCADE's mesher works to {MIN_TOLERANCE:g} model units "
+                          f"at best; give {MIN_TOLERANCE:g} or more")
+    return value
+
+
+def _surfaces_of(splines) -> list:
+    return [s.surface if isinstance(s, TrimmedSurface) else s for s in splines]
+
+
+def _integrated_curvature(surface, resolution: int = 64) -> float:
+    """Integral of the larger absolute principal curvature over the surface (untrimmed),
+    from the fundamental forms on a grid of ``resolution`` samples per knot span
+    direction (at least 32, at most 256), midpoint rule (do Carmo 3.3)."""
+    res = [int(min(max(32, 4 * (n - p)), 256)) for n, p in zip(surface.sizes, surface.degrees)]
+    u, v = surface.grid_axes(res)
+    with torch.no_grad():
+        d = surface.detach().evaluate_grid(u, v, order=2).to(torch.float64).cpu().numpy()  # (R, S, 3, 3, dim)
+    if d.shape[-1] != 3:
+        return 0.0
+    su, sv = d[..., 1, 0, :], d[..., 0, 1, :]
+    normal = np.cross(su, sv)
+    area = np.linalg.norm(normal, axis=-1)
+    normal = normal / np.maximum(area, 1e-300)[..., None]
+    E, F, G = (su * su).sum(-1), (su * sv).sum(-1), (sv * sv).sum(-1)
+    L, M, N = ((d[..., i, j, :] * normal).sum(-1) for i, j in ((2, 0), (1, 1), (0, 2)))
+    det = E * G - F * F
+    with np.errstate(divide="ignore", invalid="ignore"):
+        K = (L * N - M * M) / det
+        H = (E * N - 2 * F * M + G * L) / (2 * det)
+        kmax = np.abs(H) + np.sqrt(np.maximum(H * H - K, 0.0))
+    kmax = np.where((det > 0) & np.isfinite(kmax), kmax, 0.0)  # degenerate points (poles) carry no area
+    span = (float(u[-1] - u[0])) * (float(v[-1] - v[0]))
+    return float(np.mean(kmax * area) * span)
+
+
+def estimate_triangles(splines, tolerance: float) -> int:
+    """About how many triangles OCC's mesher makes for ``splines`` at chordal ``tolerance``.
+
+    A triangle of edge ``h`` on a surface of curvature ``k`` departs from it by about
+    ``k h^2 / 8``, so the count grows as (integrated curvature) / tolerance; the constant
+    is fitted to OCC's counts (within a factor of 3 on the shapes tried, above rather than
+    below). Trimmed surfaces are counted untrimmed.
+    """
+    total = sum(_integrated_curvature(s) for s in _surfaces_of(splines))
+    return int(_TRIANGLES_PER_CURVATURE * total / tolerance) + 2 * len(splines)
+
+
+def check_tessellation_fits(splines, tolerance: float, option: str = "tolerance") -> int:
+    """Refuse (OptionError naming ``option``) a tolerance whose mesh would not fit in memory,
+    before OCC starts; returns the estimated triangle count."""
+    from ..._budget import available_bytes, require_memory
+
+    triangles = estimate_triangles(splines, tolerance)
+    need = triangles * BYTES_PER_TRIANGLE
+    budget = available_bytes()
+    fits = tolerance * need / max(budget, 1)
+    require_memory(need, f"{option} {tolerance:g} (about {triangles:,} triangles)",
+                   f"a tolerance of {fits:.2g} or more fits", budget=budget)
+    return triangles
+
+
+def tessellate_objects(objects: list, tolerance: float | None = None, *,
+                       tolerance_option: str = "tolerance") -> tuple[np.ndarray, np.ndarray]:
     """One triangle mesh for curves-free geometry: meshes as they are; surfaces (trimmed or
     not) through OCC's mesher (``tolerance``: chordal, model units; default 1e-3 of the
-    bounding-box diagonal of the control points)."""
+    bounding-box diagonal of the control points). A tolerance that is not a positive finite
+    number, or whose mesh would not fit in memory, is refused before any meshing (messages
+    name ``tolerance_option``)."""
+    tolerance = check_tolerance(tolerance, tolerance_option)
     meshes = [o for o in objects if _is_mesh(o) or (isinstance(o, tuple) and len(o) == 2)]
     splines = [o for o in objects if o not in meshes and (isinstance(o, TrimmedSurface)
                                                          or getattr(o, "kind", None) == "surface")]
@@ -506,7 +594,9 @@ def tessellate_objects(objects: list, tolerance: float | None = None) -> tuple[n
         offset += len(v)
     if splines:
         if tolerance is None:
-            tolerance = 1e-3 * _diagonal(splines)
+            tolerance = max(1e-3 * _diagonal(splines), MIN_TOLERANCE)
+            tolerance_option = "the default tolerance"
+        check_tessellation_fits(splines, tolerance, tolerance_option)
         v, f = tessellate_shape(to_shape(splines, sew_tolerance=None), tolerance)
         verts.append(v)
         faces.append(f + offset)
@@ -541,7 +631,7 @@ def result_format(path: str | os.PathLike, format: str | None = None) -> str:
 
 
 def write_result(obj, path: str | os.PathLike, format: str | None = None, tolerance: float | None = None,
-                 *, check: bool = True, analytic: bool = True) -> dict:
+                 *, check: bool = True, analytic: bool = True, tolerance_option: str = "tolerance") -> dict:
     """Write a result (surface, trimmed surface, curve, patch list or mesh) in any format.
 
     CAD formats (step, iges, brep) go through :func:`write_cad` (read back and checked;
@@ -550,7 +640,8 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
     ``3dm`` through rhino3dm (trimming loops are not stored there: reported in
     ``left_out``); ``json`` as nurbskit JSON; mesh formats (obj, ply, stl, gltf/glb,
     off) tessellate surfaces with OCC's mesher to ``tolerance`` (chordal, model units;
-    default 1e-3 of the bounding-box diagonal) and are written by trimesh.
+    default 1e-3 of the bounding-box diagonal) and are written by trimesh; a tolerance
+    whose mesh would not fit in memory is refused first (messages name ``tolerance_option``).
 
     Returns:
         A report: ``format``, ``path``, and per format the check report (CAD), the
@@ -560,6 +651,7 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
 
     path = Path(path)
     fmt = result_format(path, format)
+    check_tolerance(tolerance, tolerance_option)
     objects = _as_list(obj)
     if fmt not in ("step", "iges", "brep"):  # only OCC's formats have swept surfaces: the rest get the NURBS
         objects = [o.to_nurbs() if is_swept(o) else o for o in objects]
@@ -577,7 +669,7 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
             json.dump(objects_to_json(objects), handle)
         report = {"format": "json"}
     else:
-        vertices, faces = tessellate_objects(objects, tolerance)
+        vertices, faces = tessellate_objects(objects, tolerance, tolerance_option=tolerance_option)
         report = {"format": fmt, **write_triangles(vertices, faces, path, fmt)}
     report["path"] = str(path)
     return report
@@ -604,4 +696,5 @@ def write_triangles(vertices: np.ndarray, faces: np.ndarray, path: Path, fmt: st
 
 __all__ = ["write_cad", "write_shape", "read_cad", "read_shape", "cad_info", "format_cad_info", "cad_format", "read_objects",
            "objects_to_json", "write_result", "result_format", "tessellate_objects", "write_triangles",
+           "check_tolerance", "estimate_triangles", "check_tessellation_fits", "MIN_TOLERANCE",
            "CAD_FORMATS", "RESULT_FORMATS"]
