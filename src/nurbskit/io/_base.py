@@ -350,7 +350,7 @@ def _table_error(path: Path, source, what: str, first_line: int, delimiter: str 
             if not text:
                 continue
             fields = split(text)
-            bad = next((f for f in fields if not _is_number(f)), None)
+            bad = next((f for f in fields if not is_number(f)), None)
             if bad is not None or (width is not None and len(fields) != width):
                 if width is not None and len(fields) != width:
                     detail = (f"{len(fields)} value{'s' if len(fields) != 1 else ''} separated by {sep}, "
@@ -373,7 +373,8 @@ def _table_error(path: Path, source, what: str, first_line: int, delimiter: str 
     return f"{path}: {what}: not a table of numbers{lineno} ({detail})"
 
 
-def _is_number(token: bytes) -> bool:
+def is_number(token: bytes | str) -> bool:
+    """Whether ``float(token)`` reads it."""
     try:
         float(token)
         return True

@@ -41,7 +41,7 @@ from ..core.spline import TensorSpline
 from ..core.surface import NURBSSurface
 from ..core.volume import NURBSVolume
 from ..errors import NurbskitError, OptionError
-from ._base import InputError, check_readable, read_bytes
+from ._base import InputError, check_readable, is_number, read_bytes
 
 NURBS_FORMATS = ("nurbskit", "geomdl", "ctrlpts", "cptw", "smesh", "3dm", "cad")
 _CAD_EXTENSIONS = (".step", ".stp", ".iges", ".igs", ".brep")  # through OpenCASCADE: io/cad
@@ -252,7 +252,7 @@ def read_weights(path: str | os.PathLike) -> np.ndarray:
     try:
         values = np.array([float(t) for t in tokens], dtype=np.float64)
     except ValueError:
-        bad = next(t for t in tokens if not _is_float(t))
+        bad = next(t for t in tokens if not is_number(t))
         raise InputError(f"{path}: weights must be numbers separated by commas; found {bad[:30]!r}") from None
     if values.size == 0:
         raise InputError(f"{path}: holds no weights")
@@ -260,14 +260,6 @@ def read_weights(path: str | os.PathLike) -> np.ndarray:
         bad = values[~(np.isfinite(values) & (values > 0))][0]
         raise InputError(f"{path}: weights must be positive and finite, found {_plain(bad)!r}")
     return values
-
-
-def _is_float(token: bytes) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
 
 
 def _side_json(path: Path, meta) -> tuple[dict, Path | None]:
