@@ -319,3 +319,22 @@ def test_the_duck_refuses_a_hopeless_tolerance(shared_data, tmp_path, capsys, mo
     _fails(capsys, ["export", str(src), str(tmp_path / "t.obj"), "--tolerance", "1e-7"],
            "--tolerance 1e-07", "of memory")
     assert not (tmp_path / "t.obj").exists()
+
+
+def test_the_ducks_default_mesh_is_not_ocps_quiet_failure(shared_data, tmp_path):
+    # At the duck's default tolerance (1e-3 of its diagonal, 0.0057) OCC's mesher returns 118
+    # triangles with no error status; 0.0055 gives 18,588. The export meshes again, finer.
+    require_extra("OCP", "cad")
+    from nurbskit.io.cad.exchange import estimate_triangles, tessellate_objects
+
+    duck = shared_file(shared_data, "thesis_nurbsdiff/ducky/duck1.ctrlpts")
+    src = tmp_path / "d.json"
+    assert run(["convert", str(duck), str(src), "--sizes", "14", "13", "--degrees", "3", "3"]) == 0
+    surface = read_nurbs(src)
+    for tolerance in (0.0057, 0.02):
+        _, faces = tessellate_objects([surface], tolerance)
+        assert len(faces) > 3000
+        assert len(faces) * 30 >= estimate_triangles([surface], tolerance)
+    assert run(["export", str(src), str(tmp_path / "d.obj")]) == 0
+    with open(tmp_path / "d.obj") as handle:
+        assert sum(line.startswith("f ") for line in handle) > 10000
