@@ -338,3 +338,10 @@ def test_the_ducks_default_mesh_is_not_ocps_quiet_failure(shared_data, tmp_path)
     assert run(["export", str(src), str(tmp_path / "d.obj")]) == 0
     with open(tmp_path / "d.obj") as handle:
         assert sum(line.startswith("f ") for line in handle) > 10000
+
+
+def test_export_bounds_json_nesting(tmp_path, capsys):
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    _fails(capsys, ["export", str(deep), str(tmp_path / "d.step")], "deep.json: JSON is nested 100,000 levels deep")
+    assert not (tmp_path / "d.step").exists()

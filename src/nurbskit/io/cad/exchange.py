@@ -419,11 +419,9 @@ def read_objects(path: str | os.PathLike) -> list:
 
 def _read_json_objects(path: Path) -> list:
     from ...core.serialize import from_dict
+    from .._json import load_json
 
-    try:
-        data = json.loads(path.read_bytes())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not valid JSON ({getattr(exc, 'msg', exc)})") from None
+    data = load_json(path)  # nesting bounded, one-line errors
     if isinstance(data, dict) and "format" not in data and data.get("kind") in ("revolution", "extrusion", "freeform") \
             and "profile" in data:  # the report.json of `nurbskit shape`
         from .analytic import swept_from_report
