@@ -345,3 +345,31 @@ def test_export_bounds_json_nesting(tmp_path, capsys):
     deep.write_text("[" * 100_000 + "]" * 100_000)
     _fails(capsys, ["export", str(deep), str(tmp_path / "d.step")], "deep.json: JSON is nested 100,000 levels deep")
     assert not (tmp_path / "d.step").exists()
+
+
+def test_within_keeps_every_companion_file_inside_the_folder(tmp_path):
+    # The studio reads files named by a browser: a .ctrlpts's side JSON and weights files
+    # must not reach outside its folder (absolute names, '..', symbolic links).
+    wd = tmp_path / "wd"
+    wd.mkdir()
+    pts = np.array([[i, j, 0.0] for i in range(4) for j in range(4)])
+    outside = tmp_path / "secret.weights"
+    outside.write_text(",".join(["2"] * 16))
+    for name, target in (("abs", str(outside)), ("up", "../secret.weights")):
+        np.savetxt(wd / f"{name}.ctrlpts", pts, delimiter=",")
+        (wd / f"{name}.ctrlpts.json").write_text(json.dumps({"sizes": [4, 4], "degrees": [3, 3], "weights": target}))
+        assert read_nurbs(wd / f"{name}.ctrlpts").weights.flatten()[0] == 2.0  # a command-line user's own files
+        with pytest.raises(InputError, match="secret.weights: the weights file its side JSON names lies outside wd/"):
+            read_nurbs(wd / f"{name}.ctrlpts", within=wd)
+    np.savetxt(wd / "link.ctrlpts", pts, delimiter=",")
+    os.symlink(outside, wd / "link.weights")
+    with pytest.raises(InputError, match="link.weights: the weights file beside it lies outside wd/"):
+        read_nurbs(wd / "link.ctrlpts", within=wd, sizes=[4, 4], degrees=[3, 3])
+    os.symlink(tmp_path / "elsewhere.json", wd / "side.ctrlpts.json")
+    (tmp_path / "elsewhere.json").write_text(json.dumps({"sizes": [4, 4], "degrees": [3, 3]}))
+    np.savetxt(wd / "side.ctrlpts", pts, delimiter=",")
+    with pytest.raises(InputError, match="side JSON lies outside wd/"):
+        read_nurbs(wd / "side.ctrlpts", within=wd)
+    (wd / "inside.weights").write_text(",".join(["3"] * 16))  # inside: read as before
+    np.savetxt(wd / "inside.ctrlpts", pts, delimiter=",")
+    assert read_nurbs(wd / "inside.ctrlpts", within=wd, sizes=[4, 4], degrees=[3, 3]).weights.flatten()[0] == 3.0

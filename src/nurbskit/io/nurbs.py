@@ -99,7 +99,8 @@ def is_nurbs_file(path: str | os.PathLike) -> bool:
 # ---- reading ------------------------------------------------------------------------
 
 def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int = 0,
-               dtype: torch.dtype = torch.float64, **options) -> TensorSpline:
+               dtype: torch.dtype = torch.float64, within: str | os.PathLike | None = None,
+               **options) -> TensorSpline:
     """Read a NURBS curve, surface or volume.
 
     Args:
@@ -107,6 +108,10 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
         format: force one of 'nurbskit', 'geomdl', 'ctrlpts', 'cptw', 'smesh', '3dm'.
         index: which object, for files holding several (geomdl JSON, .3dm).
         dtype: dtype of the returned tensors.
+        within: a folder that every file read must lie in, after following symbolic
+            links: the file itself and the companions a control-point file brings (its
+            side JSON, a sibling ``.weights``, a weights file the side JSON names). For
+            a server (the studio) that takes file names from a client; None: no limit.
         options: for control-point files: ``sizes``, ``degrees``, ``knot_vectors``,
             ``weights`` (array, a path, or None), ``kind``, ``meta`` (side JSON path).
 
@@ -115,16 +120,16 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
         >>> duck.sizes  # doctest: +SKIP
         (14, 13)
     """
-    path = check_readable(path)
+    path = _inside(check_readable(path), within, "file")
     fmt = nurbs_format(path, format)
     try:
         if fmt in ("json", "nurbskit", "geomdl"):
             _no_options(path, options)
             obj = _read_json(path, fmt, index)
         elif fmt == "ctrlpts":
-            obj = _read_ctrlpts(path, options)
+            obj = _read_ctrlpts(path, options, within)
         elif fmt == "cptw":
-            obj = _read_cptw(path, options)
+            obj = _read_cptw(path, options, within)
         elif fmt == "smesh":
             _no_options(path, options)
             obj = _read_smesh(path)
@@ -262,7 +267,17 @@ def read_weights(path: str | os.PathLike) -> np.ndarray:
     return values
 
 
-def _side_json(path: Path, meta) -> tuple[dict, Path | None]:
+def _inside(path: Path, within, what: str) -> Path:
+    """``path``, or an InputError when ``within`` is a folder and ``path``'s real location
+    (symbolic links followed) is not inside it (see :func:`read_nurbs`)."""
+    if within is not None:
+        root, real = Path(within).resolve(), Path(path).resolve()
+        if real != root and root not in real.parents:
+            raise InputError(f"{Path(path).name}: the {what} lies outside {root.name}/, the only folder read here")
+    return path
+
+
+def _side_json(path: Path, meta, within=None) -> tuple[dict, Path | None]:
     if meta is None:
         for candidate in (path.with_name(path.name + ".json"),):
             if candidate.is_file():
@@ -272,7 +287,7 @@ def _side_json(path: Path, meta) -> tuple[dict, Path | None]:
         return {}, None
     if isinstance(meta, dict):
         return dict(meta), path.parent
-    meta = Path(meta)
+    meta = _inside(Path(meta), within, "side JSON")
     check_readable(meta)
     data = _load_json(meta)
     if not isinstance(data, dict):
@@ -283,15 +298,15 @@ def _side_json(path: Path, meta) -> tuple[dict, Path | None]:
 _CTRL_OPTIONS = {"sizes", "degrees", "knot_vectors", "weights", "kind", "meta"}
 
 
-def _resolve(path: Path, options: dict, count: int, default_kind: str | None = None):
+def _resolve(path: Path, options: dict, count: int, default_kind: str | None = None, within=None):
     unknown = set(options) - _CTRL_OPTIONS
     if unknown:
         raise OptionError(f"{path}: unknown options {sorted(unknown)}; allowed: {sorted(_CTRL_OPTIONS)}")
-    side, base = _side_json(path, options.get("meta"))
+    side, base = _side_json(path, options.get("meta"), within)
     merged = {k: side[k] for k in ("sizes", "degrees", "knot_vectors", "weights", "kind") if k in side}
     merged.update({k: v for k, v in options.items() if k != "meta"})
     if "weights" in merged and isinstance(merged["weights"], str) and base is not None and "weights" not in options:
-        merged["weights"] = str(base / merged["weights"])
+        merged["weights"] = str(_inside(base / merged["weights"], within, "weights file its side JSON names"))
     kv = merged.get("knot_vectors")
     if kv is not None:
         kv = [None if k is None else np.asarray(k, dtype=np.float64).ravel() for k in kv]
@@ -329,10 +344,10 @@ def _resolve(path: Path, options: dict, count: int, default_kind: str | None = N
     return kind, sizes, degrees, kv, merged.get("weights", _AUTO)
 
 
-def _weights_for(path: Path, spec, count: int) -> np.ndarray | None:
+def _weights_for(path: Path, spec, count: int, within=None) -> np.ndarray | None:
     if spec is _AUTO or (isinstance(spec, str) and spec == _AUTO):
         sibling = path.with_suffix(".weights")
-        spec = sibling if sibling.is_file() else None
+        spec = _inside(sibling, within, "weights file beside it") if sibling.is_file() else None
     if spec is None:
         return None
     if isinstance(spec, (str, os.PathLike)):
@@ -346,18 +361,18 @@ def _weights_for(path: Path, spec, count: int) -> np.ndarray | None:
     return w
 
 
-def _read_ctrlpts(path: Path, options: dict) -> TensorSpline:
+def _read_ctrlpts(path: Path, options: dict, within=None) -> TensorSpline:
     from .text import read_table
 
     table = read_table(path)
     if table.shape[1] not in (2, 3):
         raise InputError(f"{path}: .ctrlpts lines need 2 or 3 numbers (x y [z]), found {table.shape[1]}")
-    kind, sizes, degrees, kv, wspec = _resolve(path, options, table.shape[0])
-    weights = _weights_for(path, wspec, table.shape[0])
+    kind, sizes, degrees, kv, wspec = _resolve(path, options, table.shape[0], within=within)
+    weights = _weights_for(path, wspec, table.shape[0], within)
     return _assemble(kind, table, weights, sizes, degrees, kv)
 
 
-def _read_cptw(path: Path, options: dict) -> TensorSpline:
+def _read_cptw(path: Path, options: dict, within=None) -> TensorSpline:
     text = read_bytes(path).decode("ascii", errors="replace")
     rows = [r.strip().rstrip(";") for r in text.splitlines() if r.strip() and not r.lstrip().startswith(("#", "%"))]
     if not rows:
@@ -380,7 +395,7 @@ def _read_cptw(path: Path, options: dict) -> TensorSpline:
     opts = dict(options)
     if "sizes" not in opts and not (opts.get("meta") or path.with_name(path.name + ".json").is_file()):
         opts["sizes"] = [n_rows] if n_cols == 1 else [n_rows, n_cols]
-    kind, sizes, degrees, kv, wspec = _resolve(path, opts, cpw.shape[0])
+    kind, sizes, degrees, kv, wspec = _resolve(path, opts, cpw.shape[0], within=within)
     w = cpw[:, -1]
     if not np.all(np.isfinite(w)) or np.any(w <= 0):
         raise InputError(f"{path}: weights (the last value of each point) must be positive")

@@ -283,7 +283,8 @@ class SupervisedTab(TabBase):
             if self.degrees.value.strip():
                 options["degrees"] = [int(x) for x in self.degrees.value.replace(",", " ").split()]
         try:
-            obj = nurbskit.io.read_nurbs(path, **options)
+            # names come from the client: the file's companions must lie in the workdir too
+            obj = nurbskit.io.read_nurbs(path, within=self.session.workdir.root, **options)
         except (InputError, OptionError) as exc:
             raise type(exc)(str(exc).replace(str(path), name)) from None
         except Exception as exc:  # noqa: BLE001
