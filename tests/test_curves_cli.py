@@ -89,6 +89,15 @@ def test_curves_unknown_method_or_mode_is_a_usage_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("method, mode", [("classic", "MV"), ("hybrid", "V"), ("auto", "M")])
+def test_curves_mode_a_method_does_not_use_is_refused(tmp_path, capsys, method, mode):
+    src = _write(tmp_path / "d.png", 1.0 - render([dense_samples(curve_of(KNOWN))], (128, 128), 2.0))
+    assert main(["curves", str(src), "--out", str(tmp_path / "o"), "--method", method, "--mode", mode]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--mode {mode}: --method {method} reads" in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_curves_decompression_bomb_is_refused(tmp_path, capsys, monkeypatch):
     from PIL import Image as PILImage
 

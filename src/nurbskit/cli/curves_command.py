@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import OptionError
 from ._options import int_in, number_in
 
 
@@ -47,9 +48,9 @@ def register(subparsers) -> None:
                    help="hybrid: skeleton, strokes, least squares, with the MV network's vote on the number of "
                         "curves (default); classic: the same without the network; network: the shipped DeepSpline "
                         "network of --mode; auto: both (the network refined), the one closer to the ink kept")
-    p.add_argument("--mode", choices=("V", "M", "MV"), default="MV",
+    p.add_argument("--mode", choices=("V", "M", "MV"), default=None,
                    help="network of --method network: V one curve of 4-6 control points, M 1-3 curves of 5, "
-                        "MV 1-3 curves of 4-6 (default)")
+                        "MV 1-3 curves of 4-6 (default); hybrid and auto use MV, classic no network")
     p.add_argument("--tolerance", type=number_in(0, 1000, low_open=True), default=1.0, metavar="PX",
                    help="largest distance in pixels from a stroke's skeleton to its curve (default 1)")
     p.add_argument("--refine", action="store_true",
@@ -145,12 +146,17 @@ def run_curves(args) -> int:
     from ..curves.classic import chamfer_to_ink
     from ._progress import StageBars
 
+    uses = {"network": args.mode or "MV", "hybrid": "MV", "auto": "MV"}.get(args.method)
+    if args.mode is not None and args.mode != uses:
+        raise OptionError(f"--mode {args.mode}: --method {args.method} reads "
+                          + (f"with the {uses} network" if uses else "without a network")
+                          + "; choose the network with --method network --mode " + args.mode)
     check_output_dir(args.out, args.overwrite, inputs=[args.image])
     start = time.perf_counter()
     grey = read_image(args.image)
     bars = StageBars(args.quiet, delay=1.0)  # a large drawing's stages; quick ones print nothing
     try:
-        curves, strokes = extract(grey, method=args.method, mode=args.mode, tolerance=args.tolerance,
+        curves, strokes = extract(grey, method=args.method, mode=uses or "MV", tolerance=args.tolerance,
                                   refine=args.refine, refine_iterations=args.refine_iters, source=str(args.image),
                                   progress=bars)
     finally:
@@ -165,7 +171,7 @@ def run_curves(args) -> int:
         "size": [w, h],
         "method": args.method,
         "chosen": strokes.chosen,
-        "mode": args.mode if args.method == "network" else ("MV" if args.method in ("auto", "hybrid") else None),
+        "mode": uses,
         "tolerance": args.tolerance,
         "refined": bool(args.refine),
         "polarity": "light on dark" if strokes.inverted else "dark on light",
