@@ -12,12 +12,18 @@ It reads and writes only inside ``--workdir``; uploads larger than
 
 from __future__ import annotations
 
+import math
+import socket
 import sys
 import time
 from pathlib import Path
 
 from ..errors import OptionError
 
+MAX_UPLOAD_MB = 10240.0
+"""The largest ``--max-upload-mb`` (10 GiB): an upload is held whole in memory, in the browser and here."""
+
+MEBIBYTE = 1024 * 1024
 
 
 def is_loopback(host: str) -> bool:
@@ -43,13 +49,63 @@ def _port(text: str) -> int:
 
 
 def _megabytes(text: str) -> float:
+    """``"200"`` -> ``200.0``: a finite number of MB above 0 and at most :data:`MAX_UPLOAD_MB`."""
+    expected = f"--max-upload-mb: expected a number of MB above 0 and at most {MAX_UPLOAD_MB:g}"
     try:
         value = float(text)
     except ValueError:
-        raise OptionError(f"--max-upload-mb: expected a positive number, got {text!r}") from None
-    if not value > 0:
-        raise OptionError(f"--max-upload-mb: expected a positive number, got {text!r}")
+        raise OptionError(f"{expected}, got {text!r}") from None
+    # nan fails every comparison; inf and 1e400 (inf too) fail the upper bound
+    if not (math.isfinite(value) and 0 < value <= MAX_UPLOAD_MB):
+        raise OptionError(f"{expected}, got {text!r}")
+    if int(value * MEBIBYTE) < 1:
+        raise OptionError(f"--max-upload-mb: expected at least one byte ({1 / MEBIBYTE:.1g} MB), got {text!r}")
     return value
+
+
+def check_host(host: str) -> str:
+    """The address to hand to viser for ``--host``; an OptionError unless it can be bound here.
+
+    viser reads every failure to bind as "port in use" and tries the next port; when the
+    host itself is the problem (a name that does not resolve, an address of another
+    machine) all 1000 tries fail and the caller then waits, silently, for ever. So resolve the host as asyncio's server does (every address the
+    name has, each bound) and bind each to port 0 (any free port): that fails only for
+    the address, never for the port, which stays viser's business (the next free one).
+    ``[::1]`` is accepted for ``::1``.
+    """
+    name = host.strip()
+    if name.startswith("[") and name.endswith("]"):
+        name = name[1:-1]
+
+    def refuse(why: str) -> OptionError:
+        return OptionError(f"--host: expected an address of this machine (or a name that resolves to one), "
+                           f"got {host!r} ({why})")
+
+    if not name:
+        raise refuse("empty; 0.0.0.0 binds every IPv4 address, :: every IPv6 one")
+    try:
+        infos = socket.getaddrinfo(name, 0, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise refuse(exc.strerror or str(exc)) from None
+    except (UnicodeError, ValueError):  # "bad..name" (idna), an embedded NUL
+        raise refuse("not a valid host name") from None
+    bound = 0
+    for family, kind, proto, _, address in dict.fromkeys(infos):
+        try:
+            sock = socket.socket(family, kind, proto)
+        except OSError:
+            continue  # a family this machine lacks; asyncio skips it too
+        with sock:
+            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
+                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, True)
+            try:
+                sock.bind((address[0], 0, *address[2:]))
+            except OSError as exc:
+                raise refuse(f"{address[0]}: {(exc.strerror or str(exc)).lower()}") from None
+        bound += 1
+    if not bound:
+        raise refuse("no socket of its address family can be made here")
+    return name
 
 
 def register(subparsers) -> None:
@@ -74,16 +130,17 @@ def run(args) -> int:
     workdir = Path(args.workdir)
     if not workdir.is_dir():
         raise OptionError(f"--workdir: {workdir} is not a directory")
+    host = check_host(args.host)  # before viser, whose bind loop never ends for a bad host
     require("viser", "studio", "nurbskit studio")
     from ..studio.app import Studio, StudioOptions
 
-    if not is_loopback(args.host):
+    if not is_loopback(host):
         sys.stderr.write(
-            f"nurbskit studio: warning: binding {args.host}: anyone who can reach this machine can use the "
+            f"nurbskit studio: warning: binding {host}: anyone who can reach this machine can use the "
             f"studio and the files in {workdir.resolve()}\n"
         )
-    studio = Studio(StudioOptions(host=args.host, port=port, workdir=workdir,
-                                  max_upload_bytes=int(limit * 1024 * 1024))).start()
+    studio = Studio(StudioOptions(host=host, port=port, workdir=workdir,
+                                  max_upload_bytes=int(limit * MEBIBYTE))).start()
     sys.stderr.write(f"nurbskit studio: serving {studio.url} (files in {studio.workdir.root}); Ctrl-C stops\n")
     sys.stderr.flush()
     if args.open:
