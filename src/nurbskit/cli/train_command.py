@@ -22,6 +22,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from ..learn.trainer import MAX_STEPS  # registering the trainers below loads torch anyway
 from ._options import int_in, number_in
 
 # Modules that add a ``nurbskit train <model>`` sub-command (``register_train(subparsers)``).
@@ -52,7 +53,7 @@ def _no_model(args) -> int:
 def add_training_options(parser, defaults) -> None:
     """The options every ``nurbskit train`` sub-command shares; ``defaults`` a TrainConfig."""
     parser.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, weights, figures)")
-    parser.add_argument("--steps", type=int_in(1), default=defaults.steps, metavar="N",
+    parser.add_argument("--steps", type=int_in(1, MAX_STEPS), default=defaults.steps, metavar="N",
                         help=f"optimiser steps (default {defaults.steps})")
     parser.add_argument("--batch-size", type=int_in(1, 4096), default=defaults.batch_size, metavar="B",
                         help=f"examples per step (default {defaults.batch_size})")
@@ -84,15 +85,16 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     """Build the model (initial weights drawn from ``--seed``) and train it with a progress bar.
 
     ``build_model()`` returns the network; the rest as :func:`nurbskit.learn.train`.
-    Prints one summary line; returns the :class:`~nurbskit.learn.TrainRun`.
+    Prints one summary line; returns the :class:`~nurbskit.learn.TrainRun`. On Ctrl-C or
+    SIGTERM says in one line what ``--out`` now holds and how to resume, then exits 130 / 143.
     """
     import torch
 
-    from .._fs import check_output_dir
     from ..learn import train
+    from ..learn.trainer import check_run_folder, load_checkpoint
 
-    if not args.resume:  # refused before any work or progress bar (train() checks again as it starts)
-        check_output_dir(args.out, args.overwrite)
+    # Refused before any work or progress bar (train() checks again as it starts).
+    check_run_folder(args.out, resume=args.resume, overwrite=args.overwrite)
     if args.threads:
         torch.set_num_threads(args.threads)
     meta = dict(meta, command="nurbskit " + " ".join(shlex.quote(a) for a in sys.argv[1:] if a != "--quiet"),
@@ -102,6 +104,8 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
         model = build_model()
     if getattr(args, "init", None):  # on --resume the checkpoint's weights replace these; the record stays
         meta["init"] = _load_initial_weights(model, args.init)
+    if args.resume:  # a checkpoint of another network or other settings: refused before the bar
+        load_checkpoint(args.out, model, config, meta)
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -115,9 +119,21 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
             bar.set_postfix_str(f"loss={values['loss']:.3e}", refresh=False)
             bar.update(0)
 
+    out = Path(args.out)
+    existed, before = out.exists(), _file_id(out / "checkpoint.pt")
     try:
         run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,
                     overwrite=args.overwrite, progress=progress, validate=validate)
+    except KeyboardInterrupt as exc:  # SIGTERM too (cli.Terminated): say what the folder now holds
+        if bar is not None:
+            bar.close()
+            bar = None
+        from . import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+
+        terminated = isinstance(exc, Terminated)
+        what = "terminated" if terminated else "interrupted"
+        print(f"nurbskit train: {what}; {_left_behind(out, existed, before, config.steps)}", file=sys.stderr)
+        raise SystemExit(EXIT_TERMINATED if terminated else EXIT_INTERRUPTED) from None
     finally:
         if bar is not None:
             bar.close()
@@ -126,6 +142,47 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     print(f"{meta.get('name', 'model')}: {run.step} steps in {run.seconds:.1f} s; {shown}")
     print(f"wrote {Path(args.out)}/: checkpoint.pt, weights.pt, history.json, training.png")
     return run
+
+
+def _file_id(path: Path):
+    """What tells a file apart from the one that replaces it (an atomic write makes a new inode)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_ino, st.st_mtime_ns, st.st_size)
+
+
+def _saved_step(out: Path):
+    """The step the run's files in ``out`` hold (history.json, written with the checkpoint), or None."""
+    import json
+
+    try:
+        return int(json.loads((out / "history.json").read_text(encoding="utf-8"))["meta"]["steps"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _resume_hint() -> str:
+    argv = sys.argv[1:]
+    if argv[:1] != ["train"]:  # called in-process (tests, scripts): sys.argv is not this command
+        return "run the same command with --resume (without --overwrite) to continue"
+    argv = [a for a in argv if a != "--overwrite"] + ([] if "--resume" in argv else ["--resume"])
+    return "continue with: nurbskit " + " ".join(shlex.quote(a) for a in argv)
+
+
+def _left_behind(out: Path, existed: bool, before, steps: int) -> str:
+    """One truthful clause on what an interrupted ``train`` left in ``out``."""
+    step = _saved_step(out)
+    at = f"step {step} of {steps}" if step is not None else "its last step"
+    if _file_id(out / "checkpoint.pt") not in (None, before):
+        return (f"kept the run at {at} in {out}/ (checkpoint.pt, weights.pt, history.json; training.png is "
+                f"drawn at the end); {_resume_hint()}")
+    if before is not None:
+        return f"{out}/ holds its files as they were (a run at {at}); nothing new was written"
+    if existed:
+        return f"{out}/ holds what it held before; nothing was written"
+    return "no output was left behind"
 
 
 def _load_initial_weights(model, name_or_path: str) -> dict:
