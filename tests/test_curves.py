@@ -305,3 +305,9 @@ def test_the_refinements_sample_matrix_evaluates_every_curve():
     want = torch.cat(want)
     assert got.shape == want.shape and S.shape[1] == sum(len(c.control_points) for c in curves)
     assert float((got - want).abs().max()) < 1e-11
+
+
+def test_noise_is_not_mistaken_for_ink_and_says_so():
+    noise = (np.random.default_rng(0).random((200, 200)) < 0.5).astype(float)
+    with pytest.raises(InputError, match=r"noise.png: no strokes found: 50 % of the pixels are dark"):
+        ink_mask(noise, "noise.png")

@@ -181,7 +181,9 @@ def ink_mask(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, bool]
         spread = 0.0
     mask = grey > max(t, median + spread) if inverted else grey <= min(t, median - spread)
     if not mask.any():
-        raise InputError(f"{source}: no ink found after thresholding")
+        raise InputError(f"{source}: no strokes found: {100 * dark.mean():.0f} % of the pixels are dark and none "
+                         "stands out from the background as ink does (noise, or a picture without strokes?); "
+                         "expected dark strokes on a light background or light on dark")
     return mask, bool(inverted)
 
 
