@@ -393,6 +393,9 @@ def test_ctrl_c_ends_every_process_and_leaves_no_half_written_output(clouds, tmp
     assert alive == [], f"left running after Ctrl-C: {alive}"
     reader.join(timeout=5)
     assert any("interrupted" in ln for ln in lines) and not any("Traceback" in ln for ln in lines), lines
+    said = [ln for ln in lines if "nurbskit batch: interrupted" in ln]
+    assert len(said) == 1 and "no partial output" not in said[0], lines
+    assert "inputs finished and the summary in" in said[0] and "--resume" in said[0], said
     # Only complete folders: each one has its completion marker; the summary says what ran.
     for folder in out.iterdir():
         if folder.is_dir():

@@ -173,3 +173,21 @@ def test_train_curves_sketch_is_an_option_of_mv_only(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1
     assert "--sketch" in err and "MV" in err and "Traceback" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("width, noted", [(2.0, False), (14.0, True)])
+def test_the_network_method_notes_strokes_thicker_than_it_knows(width, noted, tmp_path, capsys):
+    """The networks learnt strokes up to about 5 % of a drawing (1-3 px at 128 px); the
+    hybrid method reads thicker ones classically, --method network says what it was given."""
+    ink = render([dense_samples(curve_of(KNOWN))], (128, 128), width)
+    src = _write(tmp_path / "pen.png", 1.0 - ink)
+    assert main(["curves", str(src), "--out", str(tmp_path / "o"), "--method", "network"]) == 0
+    err = capsys.readouterr().err
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["stroke_width"] == pytest.approx(width, abs=2.0)
+    if noted:
+        assert err.count("\n") == 1 and err.startswith(f"nurbskit curves: note: {src}: the strokes are ")
+        assert "(hybrid) reads such drawings classically" in err
+        assert report["notes"] == [err.split(f"{src}: ", 1)[1].rstrip("\n")]
+    else:
+        assert "note" not in err and "notes" not in report

@@ -9,7 +9,7 @@ import socket
 import pytest
 
 from nurbskit.cli import main
-from nurbskit.cli.studio_command import MAX_UPLOAD_MB, _megabytes, check_host
+from nurbskit.cli.studio_command import MAX_UPLOAD_MB, _megabytes, check_host, check_port
 from nurbskit.errors import OptionError
 
 HOST_EXPECTED = "--host: expected an address of this machine (or a name that resolves to one), got "
@@ -64,6 +64,46 @@ def test_a_port_in_use_is_not_the_hosts_fault():
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         assert check_host("127.0.0.1") == "127.0.0.1"
+
+
+def _listening(port: int = 0) -> socket.socket:
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", port))
+    sock.listen()
+    return sock
+
+
+def test_a_free_port_is_kept_and_a_taken_one_moves_to_the_next_free():
+    with _listening() as busy:
+        taken = busy.getsockname()[1]
+        chosen = check_port("127.0.0.1", taken)
+        assert chosen > taken  # the next port that binds, as viser would move on
+        with socket.socket() as probe:  # and it really is free
+            probe.bind(("127.0.0.1", chosen))
+    assert check_port("127.0.0.1", 0) == 0
+
+
+def test_the_last_port_taken_is_one_line_not_a_hang():
+    """viser's loop would try 65536 (OverflowError in its thread) and the studio never start."""
+    try:
+        busy = _listening(65535)
+    except OSError:
+        pytest.skip("port 65535 is taken on this machine by something else")
+    with busy, pytest.raises(OptionError, match=r"--port: 65535 and the ports after it up to 65535 are in use"):
+        check_port("127.0.0.1", 65535)
+
+
+def test_a_privileged_port_is_one_line_not_a_thousand_tries(monkeypatch):
+    """Without root, viser takes 'permission denied' for 'in use' and tries the next 1000
+    ports, all privileged from port 1 on, then waits for ever."""
+    import nurbskit.cli.studio_command as sc
+
+    def denied(addresses, port):
+        raise OSError(13, "127.0.0.1: permission denied")
+
+    monkeypatch.setattr(sc, "_bind_all", denied)
+    with pytest.raises(OptionError, match=r"--port: 1 is not open to this user \(permission denied"):
+        check_port("127.0.0.1", 1)
 
 
 @pytest.mark.parametrize("host", ["192.0.2.1", "bad..name", ""])

@@ -86,6 +86,16 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator:
 
 # ---- the output folder ----------------------------------------------------------------
 
+def file_id(path: Path):
+    """What tells a file apart from the one that replaces it (an atomic write makes a new
+    inode) -> a tuple, or None when there is no file."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_ino, st.st_mtime_ns, st.st_size)
+
+
 def read_manifest(folder: Path) -> dict[str, int] | None:
     """``{relative posix path: size}`` from the folder's manifest, or None when absent or unreadable."""
     try:

@@ -9,6 +9,7 @@
   ``high``, ``low_open``, ``choices`` and ``flag`` (see
   :class:`nurbskit.volume.config.VolumeFitConfig`); every option defaults to None,
   meaning "the preset's value".
+* :func:`resume_hint`: how to continue an interrupted ``train`` or ``batch``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
+import sys
 
 from ..errors import OptionError
 
@@ -160,3 +163,16 @@ def config_from_args(args, base, skip: tuple[str, ...] = ()):
         if f.name not in skip and getattr(args, f.name, None) is not None
     }
     return dataclasses.replace(base, **changes).validate()
+
+
+def resume_hint(command: str) -> str:
+    """How to continue an interrupted ``command`` (``"train"``, ``"batch"``): the command
+    line as typed, without ``--overwrite`` and with ``--resume`` (before a ``--`` that
+    starts another command's options)."""
+    argv = sys.argv[1:]
+    if argv[:1] != [command]:  # called in-process (tests, scripts): sys.argv is not this command
+        return "run the same command with --resume (without --overwrite) to continue"
+    end = argv.index("--") if "--" in argv else len(argv)
+    own = [a for a in argv[:end] if a != "--overwrite"]
+    argv = own + ([] if "--resume" in own else ["--resume"]) + argv[end:]
+    return "continue with: nurbskit " + " ".join(shlex.quote(a) for a in argv)

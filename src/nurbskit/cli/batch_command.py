@@ -15,11 +15,15 @@ Everything after ``--`` goes to the command itself and means what it means there
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 import threading
+from pathlib import Path
 
+from .._fs import file_id
 from ..errors import OptionError
+from ._options import resume_hint
 
 
 def _int(low: int):
@@ -155,7 +159,28 @@ class _Bar:
 
 
 def _sigterm_as_interrupt(signum, frame):
-    raise KeyboardInterrupt
+    from . import Terminated
+
+    raise Terminated
+
+
+def _left_behind(out: Path, existed: bool, before) -> str:
+    """One truthful clause on what an interrupted batch left in ``out``: the items that
+    finished (each folder complete) and the summary the runner writes on its way out."""
+    if file_id(out / "summary.json") not in (None, before):
+        try:
+            rows = json.loads((out / "summary.json").read_text(encoding="utf-8"))["rows"]
+            ok = sum(r.get("status") == "ok" for r in rows)
+            done = f"{ok} of {len(rows)} inputs finished"
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            done = "the inputs that finished"
+        return (f"kept {done} and the summary in {out}/ (summary.csv, summary.json; the others are "
+                f"listed as 'interrupted before it finished'); {resume_hint('batch')}")
+    if before is not None:
+        return f"{out}/ holds its files as they were; nothing new was summarised"
+    if existed:
+        return f"{out}/ holds what it held before; nothing was written"
+    return "no output was left behind"
 
 
 def run(args) -> int:
@@ -172,6 +197,8 @@ def run(args) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     # `kill` (SIGTERM) cleans up like Ctrl-C; signal handlers can only be set from the main thread.
     previous = signal.signal(signal.SIGTERM, _sigterm_as_interrupt) if main_thread else None
+    out = Path(args.out)
+    existed, before = out.exists(), file_id(out / "summary.json")
     try:
         records = run_batch(
             args.batch_command, args.inputs, args.out, options=command_options, workers=args.workers,
@@ -179,6 +206,14 @@ def run(args) -> int:
             retries=args.retries, timeout=args.timeout, resume=args.resume, overwrite=args.overwrite,
             figure=not args.no_figure, progress=bar,
         )
+    except KeyboardInterrupt as exc:  # SIGTERM too: say what --out now holds
+        bar.close()
+        from . import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+
+        terminated = isinstance(exc, Terminated)
+        what = "terminated" if terminated else "interrupted"
+        sys.stderr.write(f"nurbskit batch: {what}; {_left_behind(out, existed, before)}\n")
+        raise SystemExit(EXIT_TERMINATED if terminated else EXIT_INTERRUPTED) from None
     finally:
         bar.close()
         if main_thread:

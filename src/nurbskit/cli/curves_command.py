@@ -142,7 +142,7 @@ def write_overlay(path: Path, grey: np.ndarray, curves: list) -> None:
 
 def run_curves(args) -> int:
     from .._fs import atomic_open, check_output_dir, output_directory
-    from ..curves.api import COORDINATES, extract, read_image
+    from ..curves.api import COORDINATES, extract, read_image, thick_note
     from ..curves.classic import chamfer_to_ink
     from ._progress import StageBars
 
@@ -184,6 +184,9 @@ def run_curves(args) -> int:
         "coordinates": COORDINATES,
         "files": ["curves.json", "curves.svg", "overlay.png", "report.json"],
     }
+    note = thick_note(strokes)
+    if note:
+        report["notes"] = [note]
     with output_directory(args.out, args.overwrite, inputs=[args.image]) as tmp:
         try:
             bars("writing", 0, 3)
@@ -196,6 +199,8 @@ def run_curves(args) -> int:
                 json.dump(report, fh, indent=2)
         finally:
             bars.close()
+    if note:
+        sys.stderr.write(f"nurbskit curves: note: {args.image}: {note}\n")
     if not curves:
         why = (f"no stroke longer than its width ({strokes.width:.1f} px) in the ink" if strokes.width is not None
                else "the network found none")

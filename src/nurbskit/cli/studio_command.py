@@ -13,6 +13,7 @@ It reads and writes only inside ``--workdir``; uploads larger than
 from __future__ import annotations
 
 import math
+import os
 import socket
 import sys
 import time
@@ -63,15 +64,45 @@ def _megabytes(text: str) -> float:
     return value
 
 
+def _sockets(name: str):
+    """Every ``(family, kind, proto, address)`` that ``name`` resolves to for a server, as
+    asyncio's server resolves it (raises ``socket.gaierror``, ``UnicodeError`` or ``ValueError``)."""
+    infos = socket.getaddrinfo(name, 0, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
+    return [(family, kind, proto, address) for family, kind, proto, _, address in dict.fromkeys(infos)]
+
+
+def _bind_all(addresses, port: int) -> int:
+    """Bind (and release) every address at ``port``, as asyncio's server would -> the number
+    bound; raises the first bind's ``OSError``, its message naming the address. Families
+    this machine lacks are skipped."""
+    bound = 0
+    for family, kind, proto, address in addresses:
+        try:
+            sock = socket.socket(family, kind, proto)
+        except OSError:
+            continue  # a family this machine lacks; asyncio skips it too
+        with sock:
+            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
+                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, True)
+            if port and os.name == "posix":  # asyncio's server sets it on POSIX
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                sock.bind((address[0], port, *address[2:]))
+            except OSError as exc:  # the same kind (OSError maps errno to its subclass), naming the address
+                raise OSError(exc.errno, f"{address[0]}: {(exc.strerror or str(exc)).lower()}") from None
+        bound += 1
+    return bound
+
+
 def check_host(host: str) -> str:
     """The address to hand to viser for ``--host``; an OptionError unless it can be bound here.
 
     viser reads every failure to bind as "port in use" and tries the next port; when the
     host itself is the problem (a name that does not resolve, an address of another
-    machine) all 1000 tries fail and the caller then waits, silently, for ever. So resolve the host as asyncio's server does (every address the
-    name has, each bound) and bind each to port 0 (any free port): that fails only for
-    the address, never for the port, which stays viser's business (the next free one).
-    ``[::1]`` is accepted for ``::1``.
+    machine) all 1000 tries fail and the caller then waits, silently, for ever. So resolve
+    the host as asyncio's server does (every address the name has, each bound) and bind
+    each to port 0 (any free port): that fails only for the address, never for the port
+    (:func:`check_port` chooses that). ``[::1]`` is accepted for ``::1``.
     """
     name = host.strip()
     if name.startswith("[") and name.endswith("]"):
@@ -84,28 +115,47 @@ def check_host(host: str) -> str:
     if not name:
         raise refuse("empty; 0.0.0.0 binds every IPv4 address, :: every IPv6 one")
     try:
-        infos = socket.getaddrinfo(name, 0, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
+        addresses = _sockets(name)
     except socket.gaierror as exc:
         raise refuse(exc.strerror or str(exc)) from None
     except (UnicodeError, ValueError):  # "bad..name" (idna), an embedded NUL
         raise refuse("not a valid host name") from None
-    bound = 0
-    for family, kind, proto, _, address in dict.fromkeys(infos):
-        try:
-            sock = socket.socket(family, kind, proto)
-        except OSError:
-            continue  # a family this machine lacks; asyncio skips it too
-        with sock:
-            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
-                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, True)
-            try:
-                sock.bind((address[0], 0, *address[2:]))
-            except OSError as exc:
-                raise refuse(f"{address[0]}: {(exc.strerror or str(exc)).lower()}") from None
-        bound += 1
+    try:
+        bound = _bind_all(addresses, 0)
+    except OSError as exc:
+        raise refuse(exc.strerror or str(exc)) from None
     if not bound:
         raise refuse("no socket of its address family can be made here")
     return name
+
+
+#: How many ports past --port are tried when it is taken (viser's own loop tries 1000).
+PORT_TRIES = 1000
+
+
+def check_port(host: str, port: int) -> int:
+    """The port to hand to viser: ``port`` if every address of ``host`` (checked by
+    :func:`check_host`) can bind it, else the next one that can; 0 stays 0 (the system
+    picks). An OptionError when ``port`` needs privileges (viser would take "permission
+    denied" for "in use" and try the next 1000 ports, all privileged below 1024, then
+    wait for ever) or when no port from it to 65535 is free (viser's loop would run past
+    65535 and stop with the page never served)."""
+    if port == 0:
+        return 0
+    addresses = _sockets(host)
+    for candidate in range(port, min(port + PORT_TRIES, 65536)):
+        try:
+            _bind_all(addresses, candidate)
+        except PermissionError:
+            raise OptionError(f"--port: {candidate} is not open to this user (permission denied; ports below "
+                              f"1024 usually need root); use a port from 1024 to 65535, or 0 for any free one"
+                              ) from None
+        except OSError:
+            continue  # in use: the next one, as viser would
+        return candidate
+    last = min(port + PORT_TRIES, 65536) - 1
+    raise OptionError(f"--port: {port} and the ports after it up to {last} are in use on {host}; "
+                      f"choose another, or 0 for any free one")
 
 
 def register(subparsers) -> None:
@@ -131,6 +181,7 @@ def run(args) -> int:
     if not workdir.is_dir():
         raise OptionError(f"--workdir: {workdir} is not a directory")
     host = check_host(args.host)  # before viser, whose bind loop never ends for a bad host
+    port = check_port(host, port)  # or for a privileged port, or past 65535
     require("viser", "studio", "nurbskit studio")
     from ..studio.app import Studio, StudioOptions
 

@@ -23,7 +23,8 @@ import sys
 from pathlib import Path
 
 from ..learn.trainer import MAX_STEPS  # registering the trainers below loads torch anyway
-from ._options import int_in, number_in
+from .._fs import file_id
+from ._options import int_in, number_in, resume_hint
 
 # Modules that add a ``nurbskit train <model>`` sub-command (``register_train(subparsers)``).
 TRAINERS: tuple[str, ...] = (
@@ -120,7 +121,7 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
             bar.update(0)
 
     out = Path(args.out)
-    existed, before = out.exists(), _file_id(out / "checkpoint.pt")
+    existed, before = out.exists(), file_id(out / "checkpoint.pt")
     try:
         run = train(model, make_batch, loss_fn, config, args.out, meta=meta, resume=args.resume,
                     overwrite=args.overwrite, progress=progress, validate=validate)
@@ -144,15 +145,6 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
     return run
 
 
-def _file_id(path: Path):
-    """What tells a file apart from the one that replaces it (an atomic write makes a new inode)."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return (st.st_ino, st.st_mtime_ns, st.st_size)
-
-
 def _saved_step(out: Path):
     """The step the run's files in ``out`` hold (history.json, written with the checkpoint), or None."""
     import json
@@ -163,21 +155,13 @@ def _saved_step(out: Path):
         return None
 
 
-def _resume_hint() -> str:
-    argv = sys.argv[1:]
-    if argv[:1] != ["train"]:  # called in-process (tests, scripts): sys.argv is not this command
-        return "run the same command with --resume (without --overwrite) to continue"
-    argv = [a for a in argv if a != "--overwrite"] + ([] if "--resume" in argv else ["--resume"])
-    return "continue with: nurbskit " + " ".join(shlex.quote(a) for a in argv)
-
-
 def _left_behind(out: Path, existed: bool, before, steps: int) -> str:
     """One truthful clause on what an interrupted ``train`` left in ``out``."""
     step = _saved_step(out)
     at = f"step {step} of {steps}" if step is not None else "its last step"
-    if _file_id(out / "checkpoint.pt") not in (None, before):
+    if file_id(out / "checkpoint.pt") not in (None, before):
         return (f"kept the run at {at} in {out}/ (checkpoint.pt, weights.pt, history.json; training.png is "
-                f"drawn at the end); {_resume_hint()}")
+                f"drawn at the end); {resume_hint('train')}")
     if before is not None:
         return f"{out}/ holds its files as they were (a run at {at}); nothing new was written"
     if existed:

@@ -131,6 +131,7 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         return curves, Extraction(strokes.ink, strokes.inverted, strokes.width, "classic", strokes)
     if method == "hybrid":
         return _hybrid(classic_path, grey, tolerance, refine_iterations, progress)
+    from .classic import stroke_width
     from .nets.predict import network_curves, refined_curves
 
     grey = even_background(grey)  # as fit_image does for the classical path (a photographed drawing)
@@ -140,7 +141,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
             curves = refined_curves(grey, ink, mode, inverted, iterations)
         else:
             curves = network_curves(grey, mode, inverted)
-        return curves, Extraction(ink, inverted, None, "network", None)
+        # the width too, so that a caller can tell a drawing thicker than the networks know
+        return curves, Extraction(ink, inverted, stroke_width(ink), "network", None)
     classic, strokes = fit_image(grey, tolerance=tolerance, refine_iterations=iterations, source=source,
                                  progress=progress)
     net = refined_curves(grey, ink, "MV", inverted, refine_iterations)
@@ -277,6 +279,21 @@ def _coarse_refined(curves: list, ink: np.ndarray, iterations: int, progress=Non
 
     small = block_reduce(ink, (factor, factor), np.max)
     return scaled(refine(scaled(curves, 1.0 / factor), small, iterations, progress=progress), float(factor))
+
+
+def thick_note(extraction: "Extraction") -> str | None:
+    """A note for the network's curves on strokes thicker than the networks know (see
+    ``HYBRID_MAX_WIDTH``), or None. The hybrid method reads such drawings classically on
+    its own; ``method="network"`` (and ``"auto"`` when the network's curves are closer to
+    the ink) returns the network's curves all the same."""
+    if extraction.chosen != "network" or extraction.width is None or thin_enough(extraction.width, extraction.ink):
+        return None
+    rows, cols = np.nonzero(extraction.ink)
+    extent = max(int(rows.max() - rows.min()), int(cols.max() - cols.min())) + 1
+    return (f"the strokes are {extraction.width:.1f} px wide, {100 * extraction.width / extent:.0f} % of the ink's "
+            f"extent; the networks know strokes up to {100 * HYBRID_MAX_WIDTH:.0f} % (1-3 px at 128 px), so their "
+            f"curves may run along the strokes' edges or collapse inside them; the default method (hybrid) reads "
+            f"such drawings classically")
 
 
 class Extraction:
