@@ -177,14 +177,19 @@ HYBRID_MAX_WIDTH = 0.08
 GUIDE_EXTENT = 256
 
 
+def _ink_extent(ink: np.ndarray) -> int:
+    """The larger side in pixels of the box around the ink ``(H, W)`` bool (0 without ink)."""
+    rows, cols = np.nonzero(ink)
+    if not len(rows):
+        return 0
+    return max(int(rows.max() - rows.min()), int(cols.max() - cols.min())) + 1
+
+
 def thin_enough(width: float, ink: np.ndarray) -> bool:
     """Whether strokes ``width`` px wide in ``ink (H, W)`` bool are as thin, relative to the
     ink's extent, as the networks' training drawings (see ``HYBRID_MAX_WIDTH``)."""
-    rows, cols = np.nonzero(ink)
-    if not len(rows):
-        return False
-    extent = max(int(rows.max() - rows.min()), int(cols.max() - cols.min())) + 1
-    return width <= HYBRID_MAX_WIDTH * extent
+    extent = _ink_extent(ink)
+    return extent > 0 and width <= HYBRID_MAX_WIDTH * extent
 
 
 def _hybrid(classic_path, grey, tolerance, refine_iterations, progress):
@@ -286,10 +291,11 @@ def thick_note(extraction: "Extraction") -> str | None:
     ``HYBRID_MAX_WIDTH``), or None. The hybrid method reads such drawings classically on
     its own; ``method="network"`` (and ``"auto"`` when the network's curves are closer to
     the ink) returns the network's curves all the same."""
-    if extraction.chosen != "network" or extraction.width is None or thin_enough(extraction.width, extraction.ink):
+    extent = _ink_extent(extraction.ink)
+    if extraction.chosen != "network" or extraction.width is None or not extent:
         return None
-    rows, cols = np.nonzero(extraction.ink)
-    extent = max(int(rows.max() - rows.min()), int(cols.max() - cols.min())) + 1
+    if thin_enough(extraction.width, extraction.ink):
+        return None
     return (f"the strokes are {extraction.width:.1f} px wide, {100 * extraction.width / extent:.0f} % of the ink's "
             f"extent; the networks know strokes up to {100 * HYBRID_MAX_WIDTH:.0f} % (1-3 px at 128 px), so their "
             f"curves may run along the strokes' edges or collapse inside them; the default method (hybrid) reads "
