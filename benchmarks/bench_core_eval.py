@@ -342,7 +342,7 @@ def main() -> None:
     batch_rows = run_batch(args.quick, args.device, SurfEval) if args.only != "grids" else []
     subdir = "gpu" if args.device == "cuda" else ""
     suffix = ("_quick" if args.quick else "") + (f"_{args.tag}" if args.tag else "")
-    allocator = {k: v for k, v in os.environ.items() if k.startswith("MALLOC_") or k == "LD_PRELOAD"}
+    allocator = {k: v for k, v in os.environ.items() if k.startswith("MALLOC_") or k in ("LD_PRELOAD", "THP_MEM_ALLOC_ENABLE")}
     meta = {"device": args.device, "quick": args.quick, "dtype": "float32", "degree": 3, "allocator_env": allocator,
             "nurbsdiff": "ok" if SurfEval is not None else f"skipped: {reason}"}
     columns = [("control", "control"), ("grid", "grid"), ("forward_ms", "forward ms"),
