@@ -20,7 +20,7 @@ from torch.autograd import gradcheck
 from nurbskit import NURBSCurve, NURBSSurface, NURBSVolume, NurbskitError
 from nurbskit._opcount import OperationCounter
 from nurbskit.core import logits_to_knots
-from nurbskit.core.ops import elevate_degree, insert_knot, refine_knots, reverse
+from nurbskit.core.ops import elevate_degree, insert_knot, refine_knots, reverse, split
 from nurbskit.core.tensor import basis_cache
 from nurbskit.core.tessellate import tessellate
 
@@ -122,7 +122,7 @@ def test_gradcheck_on_a_batch():
 
     def with_inner(k):
         full = torch.cat([kv[:, :3], k, kv[:, 5:]], dim=-1)
-        return b._replace(knot_vectors=[full, full.flip(-1).neg().add(1)]).evaluate(uv)
+        return b._replace(knot_vectors=[full, full.flip(-1).neg().add(1)], validate=False).evaluate(uv)
 
     assert gradcheck(with_inner, (inner,))
 
@@ -322,7 +322,14 @@ def test_evaluation_outside_the_domain_names_parameter_value_and_domain():
         s.evaluate_grid(torch.tensor([0.0, 2.5], dtype=F64), torch.tensor([0.5], dtype=F64))
     # the domain ends themselves, and float32 parameters rounded at the ends, are inside
     s.evaluate(torch.tensor([[2.0, 1.0]], dtype=torch.float32))
-    s._replace().evaluate(torch.tensor([[9.0, 9.0]], dtype=F64))  # unchecked object: no error
+    s._replace(validate=False).evaluate(torch.tensor([[9.0, 9.0]], dtype=F64))  # unchecked object: no error
+    # what a validated object derives keeps the check: a batch element, a knot operation's result
+    b = NURBSSurface(torch.rand(2, 4, 4, 3, dtype=F64), (2, 2))
+    left, _ = split(s, 1.0, axis=0)  # s's u-domain is [0, 2]; the left piece's [0, 1]
+    for derived, u in [(b[0], 1.5), (refine_knots(s, [0.5]), 2.5), (elevate_degree(s), 2.5), (reverse(s), 2.5),
+                       (left, 1.5)]:
+        with pytest.raises(NurbskitError, match=rf"parameter u = {u} lies outside the domain"):
+            derived.evaluate(torch.tensor([[u, 0.5]], dtype=F64))
 
 
 def test_extrapolate_evaluates_the_end_polynomial():

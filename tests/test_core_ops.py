@@ -544,7 +544,8 @@ def test_core_find_spans_at_a_repeated_unclamped_end():
 
 def test_split_at_an_interior_break_and_clamp_over_long_end_runs():
     """Multiplicity p + 1 inside (a break) splits without insertion; p + 2 equal end knots
-    (an empty first span) are clamped away by decompose_bezier and elevate_degree."""
+    (an empty first span: construction refuses them, an unchecked object may hold them)
+    are clamped away by decompose_bezier and elevate_degree."""
     rng = np.random.default_rng(170)
     p, a, m, b = 2, -1.0, 0.25, 2.0
     broken = NURBSCurve(torch.tensor(rng.normal(size=(6, 3))), p, [a] * 3 + [m] * 3 + [b] * 3,
@@ -558,7 +559,13 @@ def test_split_at_an_interior_break_and_clamp_over_long_end_runs():
     np.testing.assert_allclose(first.evaluate(left).numpy(), broken.evaluate(left).numpy(), atol=TOL, rtol=0)
     np.testing.assert_allclose(second.evaluate(right).numpy(), broken.evaluate(right).numpy(), atol=TOL, rtol=0)
 
-    long_run = NURBSCurve(torch.tensor(rng.normal(size=(7, 2))), 3, [0.0] * 5 + [0.4, 0.7] + [1.0] * 4)
+    long_knots = [0.0] * 5 + [0.4, 0.7] + [1.0] * 4
+    with pytest.raises(NurbskitError, match=r"repeats the knot 0\.0 5 times from index 0; degree 3 allows at most 4"):
+        NURBSCurve(torch.tensor(rng.normal(size=(7, 2))), 3, long_knots)
+    with pytest.raises(NurbskitError, match=r"knot vector for v repeats the knot 0\.5 4 times from index 3"):
+        NURBSSurface(torch.rand(4, 7, 3, dtype=torch.float64), (3, 2), [None, [0, 0, 0, .5, .5, .5, .5, 1, 1, 1]])
+    long_run = NURBSCurve(torch.tensor(rng.normal(size=(7, 2))), 3, torch.tensor(long_knots, dtype=torch.float64),
+                          validate=False)
     u = torch.linspace(0, 1, 50, dtype=torch.float64)
     for out in (elevate_degree(long_run), *decompose_bezier(long_run)):
         assert int((out.knot_vector == out.knot_vector[0]).sum()) == out.degree + 1

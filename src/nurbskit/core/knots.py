@@ -94,12 +94,15 @@ def merge_close_knots(knots: Tensor, tol: float | None = None) -> Tensor:
     return torch.gather(knots, -1, index)
 
 
-def validate_knot_vector(knots: Tensor, degree: int, n_ctrl: int, axis: str = "", batch_shape: tuple = ()) -> None:
+def validate_knot_vector(knots: Tensor, degree: int, n_ctrl: int, axis: str = "", batch_shape: tuple = (),
+                         *, multiplicity: bool = True) -> None:
     """Raise a NurbskitError that names the axis when ``knots`` cannot serve.
 
     ``knots`` is ``(m,)`` (shared) or ``(*batch_shape, m)`` (one per batch element).
-    Checks count against degree and control points, monotonicity, finiteness and a
-    non-empty domain (longer than :func:`knot_tolerance`), naming the first bad element.
+    Checks count against degree and control points, monotonicity, finiteness, a
+    non-empty domain (longer than :func:`knot_tolerance`) and multiplicities of at most
+    ``degree + 1`` (knots given equal; ``multiplicity=False`` skips that test, for knots
+    that :func:`merge_close_knots` made equal), naming the first bad element.
     """
     where = f"knot vector for {axis}" if axis else "knot vector"
     if knots.ndim != 1 and tuple(knots.shape[:-1]) != tuple(batch_shape):
@@ -121,6 +124,14 @@ def validate_knot_vector(knots: Tensor, degree: int, n_ctrl: int, axis: str = ""
             raise NurbskitError(f"{where}{at} decreases at index {i + 1}: {float(k[i])!r} > {float(k[i + 1])!r}")
         if not k[n_ctrl] - k[degree] > knot_tolerance(k, knots.dtype):
             raise NurbskitError(f"{where}{at} has an empty domain [{float(k[degree])!r}, {float(k[n_ctrl])!r}]")
+        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+        runs = np.diff(np.r_[starts, k.size])
+        if multiplicity and runs.max() > degree + 1:
+            i = int(starts[np.argmax(runs)])
+            raise NurbskitError(
+                f"{where}{at} repeats the knot {float(k[i])!r} {int(runs.max())} times from index {i}; "
+                f"degree {degree} allows at most {degree + 1} (beyond that a control point has no effect)"
+            )
 
 
 def span_bounds(knots: Tensor, degree: int, n_ctrl: int) -> tuple[Tensor, Tensor]:

@@ -604,6 +604,18 @@ def project_points(
         raise NurbskitError(f"project_points: iterations must be >= 0, got {iterations}")
     if starts < 1:
         raise NurbskitError(f"project_points: starts must be >= 1, got {starts}")
+    if tol is not None and not float(tol) > 0:
+        raise NurbskitError(f"project_points: tol must be a positive number, got {tol!r}")
+    if check_every < 0:
+        raise NurbskitError(f"project_points: check_every must be >= 0 (0: never read back), got {check_every}")
+    if params is not None:
+        params = params if isinstance(params, Tensor) else torch.as_tensor(params, dtype=torch.float64)
+        want = tuple(x.shape[:-1]) + ((k,) if k > 1 else ())
+        if tuple(params.shape) != want:
+            raise NurbskitError(f"project_points: params must have shape {want}, one start per point, "
+                                f"got {tuple(params.shape)}")
+        if validate and not torch.isfinite(params.detach()).all():
+            raise NurbskitError("project_points: params (the warm start) contain NaN or infinite values")
     if chunk is None:
         chunk = 65536 if spline.device.type == "cpu" else 1 << 20
     if chunk < 1:
@@ -629,6 +641,7 @@ def project_points(
         control_points=spline.control_points.reshape(count, *spline.control_points.shape[len(batch_shape):]),
         weights=spline.weights.reshape(count, *spline.weights.shape[len(batch_shape):]),
         knot_vectors=[kv if kv.ndim == 1 else kv.reshape(count, kv.shape[-1]) for kv in spline.knot_vectors],
+        validate=False,
     )
     warm = None if params is None else torch.as_tensor(params).reshape(count, x.shape[-2], k)
     res = _project(flat, x.reshape(count, *x.shape[len(batch_shape):]), periodic, warm, count, **options)

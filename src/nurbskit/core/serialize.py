@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from .._fs import atomic_open
-from ..errors import InputError, NurbskitError
+from ..errors import InputError, NurbskitError, OptionError
 from .curve import NURBSCurve
 from .spline import TensorSpline
 from .surface import NURBSSurface
@@ -72,6 +72,8 @@ def whole_numbers(where, values, what: str) -> list[int]:
 
 def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, source: str = "data") -> TensorSpline:
     """Build a spline from the nurbskit JSON structure (validated)."""
+    if not dtype.is_floating_point:
+        raise OptionError(f"dtype: expected a floating-point dtype, got {dtype}")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise InputError(f"{source}: expected a nurbskit JSON object with \"format\": \"nurbskit\"")
     if data.get("version") != VERSION:
@@ -102,6 +104,10 @@ def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, so
 
 def save(obj: TensorSpline, path: str | os.PathLike) -> None:
     """Write ``obj`` as nurbskit JSON, atomically."""
+    if not isinstance(obj, TensorSpline):
+        raise NurbskitError(f"save needs a NURBSCurve, NURBSSurface or NURBSVolume, got {type(obj).__name__}")
+    if Path(path).is_dir():
+        raise InputError(f"{path}: is a directory, expected a file name")
     with atomic_open(path, "w") as handle:
         json.dump(to_dict(obj), handle)
 
@@ -175,6 +181,11 @@ def _geomdl():
 
 def to_geomdl(obj: TensorSpline):
     """A geomdl ``NURBS.Curve`` / ``NURBS.Surface`` / ``NURBS.Volume`` equal to ``obj``."""
+    if not isinstance(obj, TensorSpline):
+        raise NurbskitError(f"to_geomdl needs a NURBSCurve, NURBSSurface or NURBSVolume, got {type(obj).__name__}")
+    obj.require_single("to_geomdl")
+    if obj.kind == "volume" and obj.dim < 3:
+        raise NurbskitError(f"to_geomdl: geomdl holds volumes with 3-D control points, this one's are {obj.dim}-D")
     NURBS = _geomdl()
     cp, w = to_geomdl_order(obj.control_points, obj.weights)
     kvs = [kv.detach().cpu().double().tolist() for kv in obj.knot_vectors]
@@ -199,6 +210,8 @@ def to_geomdl(obj: TensorSpline):
 
 def from_geomdl(g, *, dtype: torch.dtype = torch.float64, device=None) -> TensorSpline:
     """A nurbskit object equal to a geomdl curve, surface or volume (B-spline or NURBS)."""
+    if getattr(g, "pdimension", None) not in (1, 2, 3) or not hasattr(g, "ctrlpts"):
+        raise NurbskitError(f"from_geomdl needs a geomdl curve, surface or volume, got {type(g).__name__}")
     cpw = np.asarray(g.ctrlptsw if hasattr(g, "ctrlptsw") else [list(p) + [1.0] for p in g.ctrlpts], dtype=np.float64)
     w = cpw[:, -1]
     cp = cpw[:, :-1] / w[:, None]

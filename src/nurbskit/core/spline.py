@@ -16,14 +16,17 @@ checks, in :meth:`TensorSpline.evaluate`, :meth:`~TensorSpline.derivatives` and
 :meth:`~TensorSpline.evaluate_grid`, that parameters lie in the knot domain, and raises
 an error naming the parameter, its value and the domain unless ``extrapolate=True``.
 That check reads one boolean back to the host per call, which on a GPU waits for the
-device; objects built with ``validate=False`` (as a fitting loop builds them, and as
-every object derived internally through ``_replace`` is) skip it, and then evaluation,
+device; objects built with ``validate=False`` (as a fitting loop builds them; what an
+object derives, a batch element or a knot operation's result, keeps its setting) skip
+it, and then evaluation,
 derivatives and sampling read nothing back to the host at all. :meth:`~TensorSpline.sample`
 never checks: its grid lies in the domain by construction.
 """
 
 from __future__ import annotations
 
+import math
+import operator
 from typing import Sequence
 
 import numpy as np
@@ -35,6 +38,31 @@ from .knots import clamped_uniform, merge_close_knots, validate_knot_vector
 
 Tensor = torch.Tensor
 _AXES = ("u", "v", "w")
+#: Grids above this size are checked against the available memory before they are made
+#: (one read of /proc/meminfo; smaller ones, a fit's and a network's, are never checked).
+_CHECKED_GRID_BYTES = 1 << 28
+
+
+def _order(order) -> int:
+    """A derivative order: an integer >= 0."""
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 0:
+        raise NurbskitError(f"derivative order must be an integer >= 0, got {order!r}")
+    return int(order)
+
+
+def _degrees(degrees, k: int, kind: str) -> tuple[int, ...]:
+    """One integer degree per direction; a single integer serves every direction."""
+    if not hasattr(degrees, "__iter__"):
+        degrees = (degrees,) * k
+    try:
+        out = tuple(operator.index(d) for d in degrees)
+    except TypeError:
+        out = None
+    if out is None or any(isinstance(d, bool) for d in degrees):
+        if k == 1 and len(degrees) == 1:
+            raise NurbskitError(f"{kind} degree must be an integer, got {degrees[0]!r}")
+        raise NurbskitError(f"{kind} degrees must be {k} integers, got {degrees!r}")
+    return out
 
 
 def _as_tensor(x, dtype=None, device=None) -> Tensor:
@@ -73,7 +101,7 @@ class TensorSpline:
         dtype, device = cp.dtype, cp.device
         batch = tuple(cp.shape[: cp.ndim - k - 1])
         sizes = tuple(cp.shape[cp.ndim - k - 1 : -1])
-        degrees = tuple(int(d) for d in degrees)
+        degrees = _degrees(degrees, k, self.kind)
         if validate:
             if len(degrees) != k:
                 raise NurbskitError(f"{self.kind} needs {k} degree(s), got {len(degrees)}")
@@ -97,7 +125,7 @@ class TensorSpline:
                 axis = _AXES[a] if k > 1 else ""
                 validate_knot_vector(kv, p, n, axis, batch)  # shapes first, then merge, then the domain
                 kv = merge_close_knots(kv)
-                validate_knot_vector(kv, p, n, axis, batch)
+                validate_knot_vector(kv, p, n, axis, batch, multiplicity=False)
             kvs.append(kv)
         if weights is None:
             w = torch.ones(batch + sizes, dtype=dtype, device=device)
@@ -197,9 +225,13 @@ class TensorSpline:
 
     # ---- construction helpers ------------------------------------------------------
     def _replace(self, **changes) -> "TensorSpline":
-        """A new object of the same kind with some tensors replaced (no validation, and
-        no domain check on evaluation: for internal use and loops)."""
-        validate = changes.pop("validate", False)
+        """A new object of the same kind with some tensors replaced, not validated again.
+
+        It keeps this object's ``validate`` (the domain check on evaluation) unless
+        ``validate`` is given: what a validated object derives (a batch element, the result
+        of a knot operation) still refuses parameters outside its domain, and what a loop's
+        unchecked object derives reads nothing back to the host."""
+        validate = changes.pop("validate", self.validate)
         args = dict(
             control_points=self.control_points,
             weights=self.weights,
@@ -243,6 +275,9 @@ class TensorSpline:
     def _params(self, params) -> Tensor:
         t = _as_tensor(params, self.dtype, self.device)
         if self.para_dim == 1:
+            if t.ndim == 0:
+                raise NurbskitError(f"curve parameters must have shape (..., M), got the single number {float(t)!r}: "
+                                    f"pass [u]")
             t = t.unsqueeze(-1)
         elif t.ndim < 2 or t.shape[-1] != self.para_dim:
             raise NurbskitError(
@@ -306,19 +341,33 @@ class TensorSpline:
 
     def derivatives(self, params, order: int = 1, *, extrapolate: bool = False) -> Tensor:
         """Partial derivatives up to ``order`` per direction (see the class docstring for shapes)."""
-        if order < 0:
-            raise NurbskitError(f"derivative order must be >= 0, got {order}")
+        order = _order(order)
         t = self._params(params)
         self._check_domain(t, extrapolate, given=params)
         return _tp.derivatives(self.control_points, self.weights, self.knot_vectors, self.degrees, t, order)
 
-    def _resolution(self, resolution) -> tuple[int, ...]:
-        if isinstance(resolution, (int, np.integer)):
-            resolution = (int(resolution),) * self.para_dim
-        resolution = tuple(resolution)
-        if len(resolution) != self.para_dim or min(resolution) < 1:
-            raise NurbskitError(f"resolution must be {self.para_dim} positive integer(s), got {resolution}")
-        return tuple(int(r) for r in resolution)
+    def _resolution(self, resolution, *, minimum: int = 1, op: str = "sample", values: int | None = None
+                    ) -> tuple[int, ...]:
+        """``R`` or ``(R_1, ..., R_k)`` as k integers ``>= minimum``; a grid whose ``values``
+        numbers per point (default: the homogeneous point and the result) cannot fit in
+        memory is refused before anything is allocated."""
+        k = self.para_dim
+        try:
+            if isinstance(resolution, (Tensor, np.ndarray)) and resolution.ndim == 0 or not hasattr(resolution, "__iter__"):
+                res = (operator.index(resolution),) * k
+            else:
+                res = tuple(operator.index(r) for r in resolution)
+        except TypeError:
+            res = ()
+        if len(res) != k or min(res) < minimum:
+            raise NurbskitError(f"{op}: resolution must be an int or {k} ints, each >= {minimum}, got {resolution!r}")
+        points = math.prod(res) * math.prod(self.batch_shape)
+        nbytes = points * (values or 2 * self.dim + 1) * self.control_points.element_size()
+        if nbytes > _CHECKED_GRID_BYTES:
+            from .._budget import require_memory
+
+            require_memory(nbytes, f"{op} at resolution {res} ({points:,} points)", "choose a smaller resolution")
+        return res
 
     def grid_axes(self, resolution: int | Sequence[int]) -> list[Tensor]:
         """Uniformly spaced parameters over the domain, ends included, per direction:
@@ -337,9 +386,15 @@ class TensorSpline:
         """
         if len(axes) != self.para_dim:
             raise NurbskitError(f"{self.kind} evaluate_grid takes {self.para_dim} parameter arrays, got {len(axes)}")
+        order = _order(order)
         given = axes
         axes = [_as_tensor(a, self.dtype, self.device) for a in axes]
         axes = [a.reshape(-1) if a.ndim <= 1 else a for a in axes]
+        for a, ax in enumerate(axes):
+            if ax.ndim > 1 and tuple(ax.shape[:-1]) != self.batch_shape:
+                per = f" or, one row per batch element, {self.batch_shape + ('R',)}" if self.batch_shape else ""
+                raise NurbskitError(f"{self.kind} evaluate_grid: the {_AXES[a]} axis must have shape (R,){per}, "
+                                    f"got {tuple(ax.shape)}")
         for a, ax in enumerate(axes):
             self._check_domain(ax, extrapolate, grid_axis=a, given=given[a])
         return _tp.evaluate_grid(self.control_points, self.weights, self.knot_vectors, self.degrees, axes, order)
@@ -351,8 +406,10 @@ class TensorSpline:
         :meth:`evaluate_grid`). The grid is :meth:`grid_axes`; with fixed knots the basis
         matrices are cached, so repeated calls (a fit) cost a few GEMMs and no host reads.
         """
+        order = _order(order)
+        values = (order + 1) ** self.para_dim * (self.dim + 1) + self.dim
         return _tp.sample(self.control_points, self.weights, self.knot_vectors, self.degrees,
-                          self._resolution(resolution), order)
+                          self._resolution(resolution, values=values), order)
 
     # ---- conversion ----------------------------------------------------------------
     def to_dict(self) -> dict:

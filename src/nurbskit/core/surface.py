@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from ..errors import NurbskitError
 from .spline import TensorSpline
 
 Tensor = torch.Tensor
@@ -88,12 +89,17 @@ class NURBSSurface(TensorSpline):
 
         return end(ku, nu, u), end(kv, nv, v)
 
+    def _require_3d(self, op: str) -> None:
+        if self.dim != 3:
+            raise NurbskitError(f"{op} needs a surface in 3-D, got control points of dimension {self.dim}")
+
     def normals(self, params, *, extrapolate: bool = False) -> Tensor:
         """Unit normals ``S_u x S_v / |S_u x S_v|`` at ``(..., M, 2)`` -> ``(..., M, 3)``.
 
         At a pole (where ``S_u`` or ``S_v`` vanishes along an edge) the limit normal from
         inside the domain (see :func:`limit_normals`), as :func:`~nurbskit.core.tessellate.tessellate`.
         """
+        self._require_3d("normals")
         t = self._params(params)
         d = self.derivatives(t, order=1, extrapolate=extrapolate)
         at_u, at_v = self._upper_edges(t[..., 0], t[..., 1], 1)
@@ -101,6 +107,7 @@ class NURBSSurface(TensorSpline):
 
     def normals_grid(self, u, v, *, extrapolate: bool = False) -> Tensor:
         """Unit normals on a grid: ``(*B, R, S, 3)`` (limit normals at poles, as :meth:`normals`)."""
+        self._require_3d("normals_grid")
         d = self.evaluate_grid(u, v, order=1, extrapolate=extrapolate)
         u, v = [torch.as_tensor(x, dtype=self.dtype, device=self.device) for x in (u, v)]
         at_u, at_v = self._upper_edges(u.reshape(u.shape[:-1] + (-1, 1)), v.reshape(v.shape[:-1] + (1, -1)), 2)

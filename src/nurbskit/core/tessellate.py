@@ -92,10 +92,9 @@ def tessellate(surface, resolution: int | Sequence[int] = 32) -> Tessellation:
         (torch.Size([48, 3]), torch.Size([70, 3]), torch.Size([48, 3]))
     """
     _check_surface(surface, "tessellate")
-    res = (resolution, resolution) if isinstance(resolution, int) else tuple(resolution)
-    if len(res) != 2 or any(int(r) != r or r < 2 for r in res):
-        raise NurbskitError(f"tessellate: resolution must be an int or (R, S) with each >= 2, got {resolution!r}")
-    u, v = surface.grid_axes((int(res[0]), int(res[1])))
+    # per grid point: the first derivatives (4 homogeneous points), vertex and normal
+    res = surface._resolution(resolution, minimum=2, op="tessellate", values=4 * 4 + 2 * 3)
+    u, v = surface.grid_axes(res)
     return _tessellate_axes(surface, u, v)
 
 

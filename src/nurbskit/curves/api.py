@@ -122,6 +122,8 @@ def extract(grey: np.ndarray, method: str = DEFAULT_METHOD, mode: str = "MV", to
         raise OptionError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
     if not tolerance > 0:
         raise OptionError(f"tolerance: expected a positive number of pixels, got {tolerance}")
+    if isinstance(refine_iterations, bool) or not isinstance(refine_iterations, int) or refine_iterations < 0:
+        raise OptionError(f"refine_iterations: expected an integer >= 0, got {refine_iterations!r}")
     check_fits(source, *grey.shape[:2])
     iterations = refine_iterations if refine else 0
     classic_path = partial(fit_image, grey, tolerance=tolerance, refine_iterations=iterations, source=source,

@@ -122,6 +122,10 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
     """
     path = _inside(check_readable(path), within, "file")
     fmt = nurbs_format(path, format)
+    if not dtype.is_floating_point:
+        raise OptionError(f"dtype: expected a floating-point dtype, got {dtype}")
+    if fmt in ("ctrlpts", "cptw", "smesh"):
+        _one_object(path, index)
     try:
         if fmt in ("json", "nurbskit", "geomdl"):
             _no_options(path, options)
@@ -175,12 +179,19 @@ def _plain(value):
 def _read_json(path: Path, fmt: str, index: int) -> TensorSpline:
     data = _load_json(path)
     if isinstance(data, dict) and data.get("format") == "nurbskit" and fmt != "geomdl":
+        _one_object(path, index)
         return from_dict(data, source=str(path))
     if isinstance(data, dict) and "shape" in data and fmt != "nurbskit":
         return _from_geomdl_json(path, data, index)
     raise InputError(
         f"{path}: JSON is neither nurbskit ('\"format\": \"nurbskit\"') nor geomdl ('\"shape\": {{...}}') NURBS data"
     )
+
+
+def _one_object(path: Path, index: int) -> None:
+    """A file of one object answers index 0 (or -1) only."""
+    if index not in (0, -1):
+        raise OptionError(f"{path}: index {index} is out of range; the file holds one object")
 
 
 def _from_geomdl_json(path: Path, data: dict, index: int) -> TensorSpline:
@@ -455,9 +466,10 @@ def write_nurbs(path: str | os.PathLike, obj: TensorSpline, *, format: str | Non
         raise OptionError(
             f"{path}: cannot write NURBS as {ext or '(no extension)'!r}; use .json, .ctrlpts, .cptw, .smesh/.dat or .3dm"
         )
-    if fmt == "nurbskit":
+    if fmt == "nurbskit":  # the one format that holds a batch
         save(obj, path)
         return [path]
+    obj.require_single(f"writing {path.name} ({fmt})")
     if fmt == "geomdl":
         with atomic_open(path, "w") as handle:
             json.dump(to_geomdl_json(obj), handle, indent=1)
@@ -479,6 +491,7 @@ def write_nurbs(path: str | os.PathLike, obj: TensorSpline, *, format: str | Non
 
 def to_geomdl_json(obj: TensorSpline) -> dict:
     """geomdl's JSON structure (``exchange.export_json``) for one object."""
+    obj.require_single("to_geomdl_json")
     points, weights = _flatten(obj)
     axes = {"curve": [""], "surface": ["_u", "_v"], "volume": ["_u", "_v", "_w"]}[obj.kind]
     item = {"type": "spline", "rational": bool(obj.is_rational), "dimension": obj.dim}
