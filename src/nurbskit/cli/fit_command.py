@@ -173,7 +173,11 @@ def run_fit(args) -> int:
     if kind == "surface":
         data = data.to(dtype=dtype, device=device)
     else:
-        data = torch.as_tensor(data).to(dtype=dtype, device=device)
+        given = torch.as_tensor(data)
+        data = given.to(dtype=dtype, device=device)
+        if bool(torch.isfinite(given).all()) and not bool(torch.isfinite(data).all()):
+            raise InputError(f"{args.input}: coordinates up to {float(given.abs().max()):.3g} exceed "
+                             f"{str(dtype).replace('torch.', '')}; use --dtype float64")
     kwargs = {}
     if cfg.supervised:
         kwargs = {"target_surface": data} if kind == "surface" else {"target_grid": data}
@@ -200,6 +204,8 @@ def run_fit(args) -> int:
 
     try:
         result = fit_surface(points, cfg, callback=progress, **kwargs)
+    except InputError as exc:  # the data cannot be fitted: name the file it came from
+        raise InputError(f"{args.input}: {exc}") from None
     finally:
         if bar is not None:
             bar.close()

@@ -126,8 +126,16 @@ def run_patches(args) -> int:
     bars = StageBars(args.quiet)
     try:
         result = fit_patches(points, normals, cfg, init_labels=init_labels, truth=labels, progress=bars)
+    except InputError as exc:  # the cloud cannot be fitted: name the file it came from
+        raise InputError(f"{args.input}: {exc}") from None
     finally:
         bars.close()
+    if not result.patches:
+        raise InputError(
+            f"{args.input}: no patch holds its points within eps = {cfg.eps:g} of the diagonal "
+            f"({result.planar['planes']} planar regions, {len(points)} points); nothing was written; "
+            f"a larger --eps accepts a coarser fit"
+        )
     with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
         report = write_patch_outputs(result, tmp, figures=not args.no_figures, extra={"input": str(args.input)})
         if result.faces:

@@ -12,6 +12,7 @@ loop, :mod:`.loop`) -> :func:`denormalise` (the surface back in input units) ->
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -81,7 +82,7 @@ def _as_points(x, name: str) -> Tensor:
                 raise InputError(f"{name}: expected numbers, got an array of {a.dtype}") from None
         t = torch.from_numpy(np.ascontiguousarray(a))
     if not torch.isfinite(t).all():
-        raise InputError(f"{name} contains NaN or infinite values")
+        raise InputError(f"{name}: expected finite numbers, found NaN or infinite values")
     return t
 
 
@@ -160,12 +161,18 @@ def normalise(prepared: Prepared, cfg: FitConfig) -> tuple[Target, Tensor, float
     """
     pts, grid = prepared.points, prepared.grid
     lo, hi = pts.min(0).values, pts.max(0).values
-    if not float((hi - lo).norm()) > 0:
+    diagonal = bounding_diagonal(lo, hi)
+    if not diagonal > 0:
         raise InputError(f"all {pts.shape[0]} input points coincide; there is no surface to fit")
-    check_spread(pts)
+    if not 1e-150 < diagonal < 1e150:  # squares of 1e-300 and 1e300: the limits of float64
+        raise InputError(
+            f"the input points span {diagonal:.3g} (their bounding-box diagonal): squared distances, which the fit "
+            f"and its report measure in float64, would {'overflow' if diagonal > 1 else 'underflow'}; rescale the coordinates"
+        )
+    check_spread((pts - (lo + hi) / 2) / diagonal)  # in unit size: no square over- or underflows
     if cfg.normalize:
         center = (lo + hi) / 2
-        scale = float((hi - lo).norm())
+        scale = diagonal
     else:
         center, scale = torch.zeros(3, dtype=pts.dtype, device=pts.device), 1.0
     xn = (pts - center) / scale
@@ -181,6 +188,21 @@ def normalise(prepared: Prepared, cfg: FitConfig) -> tuple[Target, Tensor, float
         control_points=None if prepared.control_points is None else (prepared.control_points - center) / scale,
     )
     return target, center, scale
+
+
+def bounding_diagonal(lo: Tensor, hi: Tensor) -> float:
+    """The length of the box ``[lo, hi]``'s diagonal, also where its square over- or
+    underflows the dtype (coordinates of 1e200, or extents of 1e-300); an InputError when
+    the extent itself is not finite."""
+    extent = hi - lo
+    if not bool(torch.isfinite(extent).all()):
+        raise InputError(f"the input points span more than {str(lo.dtype).replace('torch.', '')} holds "
+                         f"(from {lo.tolist()} to {hi.tolist()}); rescale them")
+    diagonal = float(extent.norm())
+    if math.isfinite(diagonal) and diagonal > 1e-150:
+        return diagonal
+    largest = float(extent.abs().max())
+    return largest * float((extent / largest).norm()) if largest > 0 else 0.0
 
 
 def check_spread(points: Tensor, ratio: float = 1e-9) -> None:

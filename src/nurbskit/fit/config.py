@@ -188,6 +188,12 @@ class FitConfig:
             raise OptionError(f"init: expected one of {', '.join(INIT_KINDS)}, got {self.init.kind!r}")
         if self.init.closed not in CLOSED:
             raise OptionError(f"closed: expected one of {', '.join(CLOSED)}, got {self.init.closed!r}")
+        sheet, wrap = ("plane", "random"), ("cylinder",)
+        if self.init.closed == "v" and self.init.kind in sheet or self.init.closed == "open" and self.init.kind in wrap:
+            raise OptionError(
+                f"closed: the {self.init.kind} start is {'an open sheet' if self.init.kind in sheet else 'closed in v'}, "
+                f"not {self.init.closed!r}; use init auto, lstsq or cage, which follow closed"
+            )
         if self.init.closed == "v" and (self.ctrl or (15, 15))[1] < 2 * (self.degree or (3, 3))[1] + 1:
             raise OptionError(
                 "ctrl: a surface closed in v needs at least 2 * degree + 1 control points along v, "

@@ -140,7 +140,11 @@ class LBFGS:
         x = torch.cat([p.detach().reshape(-1) for p in self._params])
         d = self._direction(g)
         lr = self.param_groups[0]["lr"]
-        t = min(1.0, 1.0 / float(g.abs().sum())) * lr if self._steps == 0 else lr
+        if self._steps == 0:  # torch's first step, 1 / |g|_1 at most; a zero gradient takes lr
+            g1 = float(g.abs().sum())
+            t = min(1.0, 1.0 / g1) * lr if g1 > 0 else lr
+        else:
+            t = lr
         self._steps += 1
         gtd = g.dot(d)
         if gtd > -tolerance_change:

@@ -116,6 +116,9 @@ class PatchConfig:
         for name in ("planar_eps", "normal_angle", "min_radius", "crease_fraction", "crease_angle", "crease_seam"):
             if not getattr(self, name) > 0:
                 raise OptionError(f"{name}: expected a positive number, got {getattr(self, name)!r}")
+        for name in ("normal_angle", "crease_angle", "crease_seam"):
+            if not getattr(self, name) <= 180:
+                raise OptionError(f"{name}: expected an angle in degrees, at most 180, got {getattr(self, name)!r}")
         for name, low in (("neighbours", 3), ("min_links", 1), ("fit_points", 16), ("fit_iters", 0), ("fit_rounds", 0), ("final_iters", 0), ("final_points", 16), ("min_region", 0)):
             v = getattr(self, name)
             if int(v) != v or v < low:

@@ -150,8 +150,13 @@ def _check_points(points) -> np.ndarray:
         raise InputError(f"multi-patch fitting needs at least {MIN_POINTS} points, got {len(x)}")
     if not np.isfinite(x).all():
         raise InputError("points contain NaN or infinite values")
-    if not np.linalg.norm(x.max(0) - x.min(0)) > 0:
-        raise InputError(f"all {len(x)} points coincide; there is no surface to fit")
+    from ..fit.api import bounding_diagonal, check_spread  # the surface fit's own tests, one message each
+
+    lo, hi = torch.from_numpy(x.min(0)), torch.from_numpy(x.max(0))
+    diagonal = bounding_diagonal(lo, hi)
+    if not diagonal > 0:
+        raise InputError(f"all {len(x)} input points coincide; there is no surface to fit")
+    check_spread((torch.from_numpy(x) - (lo + hi) / 2) / diagonal)
     return x
 
 
@@ -196,10 +201,15 @@ def fit_patches(
     rng = np.random.default_rng(cfg.seed)
     # Large clouds: the planar start and the merges run on a seeded subset of max_points
     # (a surface is determined long before 10^5 points); every input point is assigned
-    # by projection onto the final patches at the end (step 5b).
-    subset = None
-    if cfg.max_points and len(full) > cfg.max_points:
-        subset = np.sort(rng.choice(len(full), cfg.max_points, replace=False))
+    # by projection onto the final patches at the end (step 5b). Points repeated in the
+    # input (scans merged, files concatenated) enter the subset once: copies would fill
+    # each other's neighbourhoods and leave the normals undefined.
+    distinct = distinct_rows(full)
+    subset = None if distinct is None else distinct
+    base = len(full) if distinct is None else len(distinct)
+    if cfg.max_points and base > cfg.max_points:
+        pick = np.sort(rng.choice(base, cfg.max_points, replace=False))
+        subset = pick if distinct is None else distinct[pick]
     x = full if subset is None else full[subset]
     n = len(x)
     xn = (x - (lo + hi) / 2) / diag  # for the quadric moments: unit diagonal
@@ -600,7 +610,20 @@ def fit_patches(
     counts["stale_pops"] = queue.stale_pops
     counts["pushes"] = queue.pushes
     counts["merged_points"] = int(len(x))
+    counts["repeated_points"] = int(len(full) - base)
     return PatchSet(patches, labels, full, nrm, labels0, cfg, eps, history, energies, m, planar, timings, counts)
+
+
+def distinct_rows(points: np.ndarray) -> np.ndarray | None:
+    """Indices of the first occurrence of every distinct row, in input order; None when no
+    row repeats.
+
+    Example:
+        >>> distinct_rows(np.array([[0.0, 1], [2, 3], [0, 1]])), distinct_rows(np.eye(2))
+        (array([0, 1]), None)
+    """
+    _, first = np.unique(points, axis=0, return_index=True)
+    return None if len(first) == len(points) else np.sort(first)
 
 
 def contains_refused(a: list[int], b: list[int], refused: list[tuple[frozenset, frozenset]]) -> bool:

@@ -106,6 +106,13 @@ def _cloud(points) -> Tensor:
         raise InputError(f"need at least 30 points to fit a shape, got {p.shape[0]}")
     if not torch.isfinite(p).all():
         raise InputError("points contain NaN or infinite values")
+    from ..fit.api import bounding_diagonal, check_spread  # the surface fit's own tests, one message each
+
+    lo, hi = p.min(0).values, p.max(0).values
+    diagonal = bounding_diagonal(lo, hi)
+    if not diagonal > 0:
+        raise InputError(f"all {p.shape[0]} input points coincide; there is no shape to fit")
+    check_spread((p - (lo + hi) / 2) / diagonal)
     return p
 
 
