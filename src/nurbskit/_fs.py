@@ -58,20 +58,50 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     ``path`` keeps whatever it held before. Writing a file onto itself is therefore
     safe: the input is read in full before the rename replaces it.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
+    with atomic_paths([path]) as (tmp_path,):
         yield tmp_path
-        # mkstemp creates 0600 files; give the result the mode a plain open() would.
-        os.chmod(tmp_path, 0o666 & ~_umask())
-        os.replace(tmp_path, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise
+
+
+@contextlib.contextmanager
+def atomic_paths(paths) -> Iterator[list[Path]]:
+    """:func:`atomic_path` for a set of files written together (a control-point file, its
+    weights and its side JSON): a temporary path beside each, all renamed onto ``paths``
+    once the block succeeds (Ctrl-C held for the renames), none on failure.
+
+    An OSError of the writing that names no file (a full disk) or a temporary file (a
+    read-only folder) is raised again naming the file the caller asked for.
+    """
+    paths = [Path(p) for p in paths]
+    temps: list[Path] = []
+    try:
+        for path in paths:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                why = "a file of that name is in the way" if isinstance(exc, FileExistsError) else exc.strerror
+                raise OSError(exc.errno, f"its folder cannot be made ({why})", str(path)) from None
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror, str(path)) from None
+            os.close(fd)
+            temps.append(Path(tmp))
+        try:
+            yield list(temps)
+        except OSError as exc:
+            ours = dict(zip(map(str, temps), paths))
+            if exc.filename is not None and str(exc.filename) not in ours:
+                raise  # another file's error (an input read while writing)
+            raise OSError(exc.errno, exc.strerror, str(ours.get(str(exc.filename), paths[0]))) from None
+        with interrupts_held():
+            for tmp, path in zip(temps, paths):
+                # mkstemp creates 0600 files; give the result the mode a plain open() would.
+                os.chmod(tmp, 0o666 & ~_umask())
+                os.replace(tmp, path)
+    finally:
+        for tmp in temps:  # the renamed ones are gone already
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
 
 
 @contextlib.contextmanager

@@ -101,7 +101,8 @@ def run_export(args) -> int:
                          analytic=not args.bspline)
     parts = [f"wrote {out} ({report['format']}"]
     if "faces" in report:
-        parts.append(f", {report['faces']} faces, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")
+        faces = f"{report['faces']} face" + ("" if report["faces"] == 1 else "s")
+        parts.append(f", {faces}, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")
     if "triangles" in report:
         parts.append(f", {report['triangles']:,} triangles")
     sys.stderr.write("nurbskit export: " + "".join(parts) + ")\n")

@@ -63,7 +63,7 @@ def whole_numbers(where, values, what: str) -> list[int]:
     out = []
     for value in items:
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(value) or float(value) != int(value):
+                or not isinstance(value, int) and (not np.isfinite(value) or float(value) != int(value)):
             shown = value.item() if isinstance(value, np.generic) else value
             raise InputError(f"{where}: {what} must be integers, found {shown!r}")
         out.append(int(value))
@@ -81,16 +81,22 @@ def from_dict(data: dict, *, dtype: torch.dtype = torch.float64, device=None, so
     kind = data.get("kind")
     if kind not in KINDS:
         raise InputError(f"{source}: kind must be one of {sorted(KINDS)}, got {kind!r}")
-    try:
-        cp = torch.as_tensor(np.asarray(data["control_points"], dtype=np.float64), dtype=dtype, device=device)
-        w = data.get("weights")
-        w = None if w is None else torch.as_tensor(np.asarray(w, dtype=np.float64), dtype=dtype, device=device)
-        kvs = [torch.as_tensor(np.asarray(k, dtype=np.float64), dtype=dtype, device=device) for k in data["knot_vectors"]]
-        degrees = whole_numbers(source, data["degrees"], "degrees")
-    except KeyError as exc:
-        raise InputError(f"{source}: missing field {exc.args[0]!r}") from None
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{source}: malformed field ({exc})") from None
+    def numbers(name: str, value):
+        try:
+            return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=dtype, device=device)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{source}: field {name!r} must be a rectangular array of numbers") from None
+
+    for name in ("control_points", "knot_vectors", "degrees"):
+        if name not in data:
+            raise InputError(f"{source}: missing field {name!r}")
+    cp = numbers("control_points", data["control_points"])
+    w = None if data.get("weights") is None else numbers("weights", data["weights"])
+    if not isinstance(data["knot_vectors"], list):
+        raise InputError(f"{source}: field 'knot_vectors' must be a list of knot vectors, "
+                         f"found {type(data['knot_vectors']).__name__}")
+    kvs = [numbers(f"knot_vectors[{i}]", k) for i, k in enumerate(data["knot_vectors"])]
+    degrees = whole_numbers(source, data["degrees"], "degrees")
     cls = KINDS[kind]
     try:
         if kind == "curve":

@@ -118,12 +118,15 @@ class Payload:
 # ---- file checks --------------------------------------------------------------------
 
 def check_readable(path: str | os.PathLike) -> Path:
-    """The path as a Path, or an InputError for a missing file, a directory, an empty file."""
+    """The path as a Path, or an InputError for a missing file, a directory, a pipe or
+    device, an empty file."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a directory, expected a file")
+    if not path.is_file():  # a FIFO, a device, a socket: no size, and perhaps no end
+        raise InputError(f"{path}: is not a regular file (a pipe or a device), expected a file")
     if path.stat().st_size == 0:
         raise InputError(f"{path}: the file is empty")
     return path

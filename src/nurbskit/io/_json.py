@@ -9,6 +9,7 @@ brackets is a cumulative sum over the bytes.
 from __future__ import annotations
 
 import json
+import sys
 import re
 from pathlib import Path
 
@@ -46,6 +47,9 @@ def loads(path: Path, text: bytes, max_depth: int = MAX_DEPTH):
         where = f" at line {exc.lineno}" if isinstance(exc, json.JSONDecodeError) else ""
         raise InputError(f"{path}: not valid JSON{where} ({getattr(exc, 'msg', exc)})") from None
     except (RecursionError, ValueError) as exc:  # a 5,000-digit integer; depth already bounded
+        if "digits" in str(exc):
+            raise InputError(f"{path}: JSON holds an integer of more than {sys.get_int_max_str_digits():,} digits; "
+                             f"no field of a nurbskit file needs one") from None
         raise InputError(f"{path}: JSON cannot be read ({exc})") from None
 
 

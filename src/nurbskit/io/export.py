@@ -102,8 +102,14 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
         raise OptionError(f"{out}: is a directory, expected an output file name")
     check_not_input(out, [src])
     check_tolerance(tolerance, tolerance_option)
-    return write_result(read_exportable(src), out, format=format, tolerance=tolerance, check=check,
-                        analytic=analytic, tolerance_option=tolerance_option)
+    obj = read_exportable(src)
+    try:
+        return write_result(obj, out, format=format, tolerance=tolerance, check=check,
+                            analytic=analytic, tolerance_option=tolerance_option)
+    except (InputError, OptionError) as exc:  # what the geometry cannot be written as: name the file it came from
+        if str(exc).startswith((str(src), str(out), "--")):
+            raise
+        raise type(exc)(f"{src}: {exc}") from None
 
 
 __all__ = ["export_file", "read_exportable", "folder_input", "MESH_INPUTS", "FOLDER_FILES"]

@@ -77,7 +77,8 @@ def writer_for(path: Path, format: str | None, kind: str) -> tuple[str, Writer]:
     if row is None or not getattr(row, kind):
         writable = ", ".join(POINT_WRITE if kind == "points" else MESH_WRITE)
         what = "points" if kind == "points" else "a mesh"
-        raise OptionError(f"{path}: cannot write {what} as {ext or '(no extension)'!r}; writable: {writable}")
+        cad = "; nurbskit export writes CAD files" if ext in (".step", ".stp", ".iges", ".igs", ".brep", ".brp") else ""
+        raise OptionError(f"{path}: cannot write {what} as {ext or '(no extension)'!r}; writable: {writable}{cad}")
     if path.is_dir():
         raise OptionError(f"{path}: is a directory, expected a file name")
     return ext, row

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._fs import atomic_open
+from .._fs import atomic_open, atomic_paths
 from ..core.curve import NURBSCurve
 from ..core.serialize import from_dict, from_geomdl_order, save, to_geomdl_order, whole_numbers
 from ..core.spline import TensorSpline
@@ -98,6 +98,11 @@ def is_nurbs_file(path: str | os.PathLike) -> bool:
 
 # ---- reading ------------------------------------------------------------------------
 
+#: The largest control-point coordinate read: beyond it, squared distances and cross
+#: products leave float64 (1e150 squared is 1e300).
+MAX_COORDINATE = 1e150
+
+
 def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int = 0,
                dtype: torch.dtype = torch.float64, within: str | os.PathLike | None = None,
                **options) -> TensorSpline:
@@ -157,7 +162,19 @@ def read_nurbs(path: str | os.PathLike, *, format: str | None = None, index: int
     except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
         # a field of the wrong kind (a list where a name belongs, text where a size belongs)
         raise InputError(f"{path}: malformed {fmt} data ({type(exc).__name__}: {exc})") from None
+    check_coordinates(obj, path)
     return obj.to(dtype)
+
+
+def check_coordinates(obj, path) -> None:
+    """An InputError naming ``path`` when the control points of ``obj`` (a spline, or what
+    holds one as ``.surface``) exceed :data:`MAX_COORDINATE`."""
+    spline = getattr(obj, "surface", obj)
+    cp = getattr(spline, "control_points", None)
+    largest = float(cp.detach().abs().max()) if cp is not None and cp.numel() else 0.0
+    if largest > MAX_COORDINATE:
+        raise InputError(f"{path}: control points up to {largest:.3g}: their squares (normals, tessellation, "
+                         f"distances) overflow float64; rescale the geometry")
 
 
 def _no_options(path, options):
@@ -515,18 +532,20 @@ def _side(obj: TensorSpline, weights_file: str | None) -> dict:
 
 
 def _write_ctrl(path: Path, obj: TensorSpline, fmt: str) -> list[Path]:
+    """The control points (``.ctrlpts``, with a ``.weights`` file when rational, or weighted
+    ``.cptw``) and the side JSON, written as one set: all or none."""
     from .text import format_rows
 
+    if obj.dim not in (2, 3):
+        raise OptionError(f"{path}: .{fmt} lines hold 2-D or 3-D points; this {obj.kind}'s are {obj.dim}-D")
     points, weights = _flatten(obj)
-    written = []
+    files: dict[Path, bytes] = {}
     weights_name = None
     if fmt == "ctrlpts":
         data = format_rows([points[:, i] for i in range(points.shape[1])], "f" * points.shape[1])
         if obj.is_rational:
             wpath = path.with_suffix(".weights")
-            with atomic_open(wpath, "w") as handle:
-                handle.write(",".join(repr(float(w)) for w in weights) + "\n")
-            written.append(wpath)
+            files[wpath] = (",".join(repr(float(w)) for w in weights) + "\n").encode()
             weights_name = wpath.name
     else:
         cpw = np.concatenate([points * weights[:, None], weights[:, None]], axis=1)
@@ -536,15 +555,15 @@ def _write_ctrl(path: Path, obj: TensorSpline, fmt: str) -> list[Path]:
         else:
             rows = [",".join(repr(float(c)) for c in pt) for pt in cpw]
         data = ("\n".join(rows) + "\n").encode()
-    with atomic_open(path, "wb") as handle:
-        handle.write(data)
     side = _side(obj, weights_name if fmt == "ctrlpts" else None)
     if fmt == "cptw":
         side.pop("weights")
     spath = path.with_name(path.name + ".json")
-    with atomic_open(spath, "w") as handle:
-        json.dump(side, handle, indent=1)
-    return [path, *written, spath]
+    files = {path: data, **files, spath: json.dumps(side, indent=1).encode()}
+    with atomic_paths(list(files)) as temps:
+        for tmp, content in zip(temps, files.values()):
+            tmp.write_bytes(content)
+    return list(files)
 
 
 def _write_smesh(path: Path, obj: TensorSpline) -> Path:

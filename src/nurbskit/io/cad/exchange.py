@@ -43,16 +43,18 @@ _QUIET = False
 
 
 def _quiet() -> None:
-    """OCC's translators print progress and statistics on stdout; library code never prints."""
+    """OCC's translators print progress, statistics and their parsers' errors (in colour)
+    on stdout; library code never prints: the default printers are removed, and every
+    failure is reported by the caller in one line of its own."""
     global _QUIET
     if _QUIET:
         return
     ocp()
-    from OCP.Message import Message, Message_Gravity
+    from OCP.Message import Message
 
-    printers = Message.DefaultMessenger_s().Printers()
-    for printer in printers:
-        printer.SetTraceLevel(Message_Gravity.Message_Fail)
+    messenger = Message.DefaultMessenger_s()
+    for printer in list(messenger.Printers()):
+        messenger.RemovePrinter(printer)
     _QUIET = True
 
 
@@ -217,7 +219,7 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
     reader = Reader()
     status = reader.ReadFile(str(path))
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
-        raise InputError(f"{path}: OpenCASCADE could not read it as a {fmt.upper()} file ({status.name})")
+        raise InputError(f"{path}: OpenCASCADE could not read it as {fmt.upper()} ({status.name})")
     with _TRANSLATOR_LOCK:
         transferred = _transfer(reader, fmt, heal)
     if transferred == 0:
@@ -400,21 +402,24 @@ def read_objects(path: str | os.PathLike) -> list:
     through :func:`nurbskit.io.read_nurbs`. The ``report.json`` of ``nurbskit shape`` gives
     its :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface``."""
     from .._base import check_readable
+    from ..nurbs import check_coordinates, read_nurbs
 
     path = check_readable(path)
     ext = path.suffix.lower()
     if ext in CAD_FORMATS:
         model = read_cad(path)
-        return [f if f.loops else f.surface for f in model.faces] + list(model.curves)
-    if ext == ".3dm":
+        found = [f if f.loops else f.surface for f in model.faces] + list(model.curves)
+    elif ext == ".3dm":
         from .rhino import read_3dm_all
 
-        return read_3dm_all(path)
-    if ext == ".json":
-        return _read_json_objects(path)
-    from ..nurbs import read_nurbs
-
-    return [read_nurbs(path)]
+        found = read_3dm_all(path)
+    elif ext == ".json":
+        found = _read_json_objects(path)
+    else:
+        return [read_nurbs(path)]
+    for obj in found:
+        check_coordinates(obj, path)
+    return found
 
 
 def _read_json_objects(path: Path) -> list:

@@ -702,6 +702,8 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
         raise OptionError(f"mesh faces index vertices 0..{len(v) - 1}, found {f.min()}..{f.max()}")
     area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     f = f[area2 > 0]  # degenerate triangles have no plane
+    if len(f) == 0:
+        raise OptionError("every triangle of the mesh has zero area; nothing to write")
     used = np.unique(f)
     occ_vertices = {int(i): BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, v[i]))).Vertex() for i in used}
     edges = {}
