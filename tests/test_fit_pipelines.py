@@ -287,3 +287,19 @@ def test_large_inputs_are_fitted_on_a_seeded_subset_and_reported_in_full(monkeyp
     cfg.max_points = 2
     with pytest.raises(OptionError, match="max_points"):
         fit_surface(pts, cfg)
+
+
+def test_progress_hears_every_alternation_round_and_iteration():
+    # A large net's alternation round solves a large system (seconds each): the callback
+    # hears of each round before the iterations, within config.progress_steps reports.
+    g = torch.rand(600, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(5))
+    pts = torch.stack([g[:, 0], g[:, 1], 0.2 * torch.sin(3 * g[:, 0]) * torch.cos(2 * g[:, 1])], -1)
+    cfg = get_pipeline("default")
+    reports = []
+    fit_surface(pts, cfg, callback=reports.append)
+    stages = [r.stage for r in reports]
+    rounds = stages.count("alternation")
+    assert 1 <= rounds <= cfg.alternation.rounds and set(stages[:rounds]) == {"alternation"}
+    assert [r.iteration for r in reports[:rounds]] == list(range(1, rounds + 1))
+    assert len(reports) - rounds == cfg.total_iters
+    assert len(reports) <= cfg.progress_steps == cfg.total_iters + cfg.alternation.rounds

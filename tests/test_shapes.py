@@ -325,3 +325,11 @@ def test_real_cylinder_vertices_close(shared_data):
     assert surface_distances(fit.surface, truth)["to_surface_max"] < 5e-3
     auto = fit_shape(v, "auto", iterations=5, freeform=False)
     assert auto.kind == "revolution", auto.reason
+
+
+def test_fit_shape_reports_its_stages():
+    calls = []
+    fit = fit_shape(vase_cloud(400, seed=2).points, "auto", iterations=3, progress=lambda *a: calls.append(a))
+    stages = list(dict.fromkeys(stage for stage, _, _ in calls))
+    assert stages[:2] == ["revolution", "extrusion"] and fit.kind == "revolution"
+    assert ("revolution", 1, 1) in calls and ("extrusion", 1, 1) in calls

@@ -192,10 +192,10 @@ def run_fit(args) -> int:
             points = data
 
     bar = None
-    if not args.quiet and cfg.total_iters:
+    if not args.quiet and cfg.progress_steps:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.total_iters, desc=f"fit {cfg.pipeline}", unit="it", file=sys.stderr, leave=False)
+        bar = tqdm(total=cfg.progress_steps, desc=f"fit {cfg.pipeline}", unit="step", file=sys.stderr, leave=False)
 
     def progress(p):
         if bar is not None:

@@ -50,6 +50,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=run_shape)
 
 
@@ -131,10 +132,16 @@ def run_shape(args) -> int:
     cloud = read_points(path)
     points = torch.as_tensor(cloud.points, dtype=torch.float64)
     normals = None if cloud.normals is None else torch.as_tensor(cloud.normals, dtype=torch.float64)
+    from ._progress import StageBars
+
+    bars = StageBars(args.quiet)
     try:
-        fit = fit_shape(points, args.kind, normals, iterations=args.iters, refine=args.iters > 0, init=args.init)
+        fit = fit_shape(points, args.kind, normals, iterations=args.iters, refine=args.iters > 0, init=args.init,
+                        progress=bars)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
+    finally:
+        bars.close()
     metrics = evaluate_fit(fit.surface, points, (64, 64))
     report = shape_report(fit, metrics)
     files = ["surface.json", "report.json"]

@@ -221,11 +221,14 @@ def check_spread(points: Tensor, ratio: float = 1e-9) -> None:
 
 
 def initial_state(
-    target: Target, cfg: FitConfig, target_surface: NURBSSurface | None = None
+    target: Target, cfg: FitConfig, target_surface: NURBSSurface | None = None,
+    callback: Callable[[Progress], None] | None = None,
 ) -> tuple[NURBSSurface, Topology, list[float], NURBSSurface]:
     """Stage 3: the initial surface, then the alternation rounds when configured.
 
     Returns ``(surface, topology, alternation history, initial surface)`` in fit units.
+    ``callback`` hears of every alternation round as a :class:`~nurbskit.fit.loop.Progress`
+    of the stage ``"alternation"`` (a round of a large net solves a large system: seconds).
     """
     xn = target.points
     dtype, device = xn.dtype, xn.device
@@ -257,8 +260,11 @@ def initial_state(
     init = surface
     alternation: list[float] = []
     if cfg.alternation.rounds and not cfg.supervised:
+        rounds = cfg.alternation.rounds
+        report = None if callback is None else (
+            lambda k, err: callback(Progress("alternation", -1, k + 1, rounds, err)))
         surface, _, alternation = alternate(
-            surface, xn, cfg.alternation.rounds, topology, cfg.alternation.smoothness, cfg.alternation.tolerance
+            surface, xn, rounds, topology, cfg.alternation.smoothness, cfg.alternation.tolerance, callback=report
         )
     return surface, topology, alternation, init
 
@@ -316,7 +322,8 @@ def fit_surface(
         target_surface: a known surface; sampled on ``config.resolution`` for the
             supervised target; its knots and weights serve ``init="target"`` (SC).
         callback: called with a :class:`~nurbskit.fit.loop.Progress` after every
-            iteration.
+            alternation round and every iteration (``config.progress_steps`` calls at
+            most).
 
     Returns:
         a :class:`FitResult`. Convention: dtype and device follow the input (a tensor's
@@ -340,7 +347,7 @@ def fit_surface(
     cfg = _resolved_sizes(cfg, target_surface)
     target, center, scale = normalise(prepared, cfg)
     check_fit_size(cfg, target)
-    surface, topology, alternation, init = initial_state(target, cfg, target_surface)
+    surface, topology, alternation, init = initial_state(target, cfg, target_surface, callback)
     t_loop = time.perf_counter()
     fitted, history = run_stages(surface, topology, target, cfg, callback)
     loop_seconds = time.perf_counter() - t_loop

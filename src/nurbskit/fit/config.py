@@ -172,6 +172,12 @@ class FitConfig:
     def total_iters(self) -> int:
         return sum(s.iters for s in self.stages)
 
+    @property
+    def progress_steps(self) -> int:
+        """How many progress reports a fit makes at most: the alternation rounds (point
+        clouds only) and the iterations."""
+        return self.total_iters + (0 if self.supervised else self.alternation.rounds)
+
     def validate(self) -> "FitConfig":
         """Raise an OptionError naming the field when a value is out of range."""
         for name, pair, low in (("ctrl", self.ctrl, 2), ("degree", self.degree, 1), ("resolution", self.resolution, 2)):

@@ -447,7 +447,7 @@ def fit_extrusion(points, normals=None, *, refine: bool = True, iterations: int 
 # ---------------------------------------------------------------------------------------
 # choice
 # ---------------------------------------------------------------------------------------
-def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> ShapeFit:
+def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict, progress=None) -> ShapeFit:
     from ..fit import fit_surface
     from ..fit.api import DEFAULT_CTRL, DEFAULT_DEGREE, resolve_config
     from ..fit.checks import fewer_controls_hint
@@ -465,7 +465,13 @@ def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> Shape
             f"cannot be determined by {m} points: {exact}fit a free-form surface with a coarser net: "
             + fewer_controls_hint(m, tuple(degree), prefix="nurbskit fit INPUT ")
         )
-    result = fit_surface(p, "default")
+    steps, done = cfg.progress_steps, [0]
+
+    def step(_report) -> None:
+        done[0] += 1
+        progress("free-form surface", done[0], steps)
+
+    result = fit_surface(p, "default", callback=None if progress is None else step)
     surface = result.surface.detach().to(F64)
     diag = float((p.amax(0) - p.amin(0)).norm())
     dist = _distances(surface, p).distance.detach()
@@ -475,7 +481,8 @@ def _freeform(p: Tensor, reason: str, t_start: float, candidates: dict) -> Shape
 
 
 def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, iterations: int = 30,
-              auto_tolerance: float = 5e-3, freeform: bool = True, init: str = "geometric") -> ShapeFit:
+              auto_tolerance: float = 5e-3, freeform: bool = True, init: str = "geometric",
+              progress=None) -> ShapeFit:
     """Fit a surface of revolution, an extrusion, or (``auto``) the better of the two.
 
     Args:
@@ -489,6 +496,8 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
             is at most this fraction of the diagonal; otherwise free-form.
         freeform: ``auto`` may fall back to :func:`nurbskit.fit_surface` (else it keeps the
             better exact shape and says it is poor).
+        progress: None, or called as ``progress(stage, done, total)`` ("revolution",
+            "extrusion", "free-form surface": one report per fitting iteration of that one).
 
     Example:
         >>> from nurbskit.shapes.synthetic import vase_cloud
@@ -500,13 +509,21 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
         raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     _check_init(init)
     _check_iterations(iterations)
+    report = progress or (lambda stage, done, total: None)
+
+    def staged(name, fn, *args, **kw):
+        report(name, 0, 1)
+        out = fn(*args, **kw)
+        report(name, 1, 1)
+        return out
+
     opts = dict(refine=refine, iterations=iterations, init=init)
     if kind == "revolution":
-        fit = fit_revolution(points, normals, **opts)
+        fit = staged("revolution", fit_revolution, points, normals, **opts)
         fit.reason = "asked for a surface of revolution"
         return fit
     if kind == "extrusion":
-        fit = fit_extrusion(points, normals, **opts)
+        fit = staged("extrusion", fit_extrusion, points, normals, **opts)
         fit.reason = "asked for an extrusion"
         return fit
     t_start = time.perf_counter()
@@ -515,16 +532,17 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
         reason = f"the points lie on a plane (thickness {planarity(p):.1e}): no axis or direction; free-form"
         if not freeform:
             raise InputError(reason.rsplit(";", 1)[0])
-        return _freeform(p, reason, t_start, {})
+        return _freeform(p, reason, t_start, {}, progress)
     fits = {}
     for name, fn in (("revolution", fit_revolution), ("extrusion", fit_extrusion)):
         try:
-            fits[name] = fn(p, normals, **opts)
+            fits[name] = staged(name, fn, p, normals, **opts)
         except InputError:
             continue
     candidates = {name: f.distance_mean for name, f in fits.items()}
     if not fits:
-        return _freeform(p, "neither a revolution nor an extrusion could be fitted; free-form", t_start, candidates)
+        return _freeform(p, "neither a revolution nor an extrusion could be fitted; free-form", t_start, candidates,
+                         progress)
     # ties (a circular cylinder is both) go to the revolution: its circle is exact either way;
     # a tie is within 5 %, or within AUTO_TIE of the diagonal (two near-exact fits of clean
     # data, e.g. a mesh's vertices, whose residuals differ by rounding)
@@ -538,4 +556,4 @@ def fit_shape(points, kind: str = "auto", normals=None, *, refine: bool = True, 
         best.seconds = time.perf_counter() - t_start
         return best
     return _freeform(p, f"no exact shape within {auto_tolerance:.1e} of the diagonal ({others}); free-form",
-                     t_start, candidates)
+                     t_start, candidates, progress)

@@ -198,7 +198,7 @@ class UnsupervisedTab(CloudTab):
         import torch
 
         points = torch.as_tensor(points, dtype=torch.float64).to(self.device.value)
-        result = nurbskit.fit_surface(points, cfg, callback=iteration_progress(progress, cfg.total_iters))
+        result = nurbskit.fit_surface(points, cfg, callback=iteration_progress(progress, cfg.progress_steps))
         from ..fit import fit_report
 
         report = fit_report(result, distances=True)
@@ -314,7 +314,7 @@ class SupervisedTab(TabBase):
         cfg = _apply_iterations(cfg, int(self.iters.value)).validate()
         progress(0.0)
         result = nurbskit.fit_surface(config=cfg, target_surface=self.target.to(device=self.device.value),
-                                      callback=iteration_progress(progress, cfg.total_iters))
+                                      callback=iteration_progress(progress, cfg.progress_steps))
         return result, fit_report(result)
 
     def _done(self, out) -> None:
