@@ -97,3 +97,19 @@ def test_photographs_are_read_upright(tmp_path, orientation, turn):
     path = tmp_path / "photo.png"
     Image.fromarray(stored).save(path, exif=exif)
     np.testing.assert_array_equal(read_image(path), np.rot90(stored, turn) / 255.0)
+
+
+def test_a_light_shape_on_a_transparent_ground_is_read_from_its_alpha(tmp_path):
+    # white paint on a transparent sheet: composited on white it vanishes; its alpha is the drawing
+    rgba = np.zeros((40, 50, 4), np.uint8)
+    rgba[..., :3] = 255
+    rgba[10:30, 15:35, 3] = 255
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "white.png")
+    with Image.open(tmp_path / "white.png") as image:
+        grey = pil_grey(image)
+    expected = np.ones((40, 50))
+    expected[10:30, 15:35] = 0.0
+    np.testing.assert_array_equal(grey, expected)
+    # a dark shape on a transparent ground still composites as before
+    rgba[..., :3] = 0
+    np.testing.assert_array_equal(to_grey(rgba), expected)

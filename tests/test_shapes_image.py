@@ -132,3 +132,14 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert err.count("\n") == 1 and "blank" in err and "blank.png" in err
     assert not (tmp_path / "o2").exists()
     assert main(["revolve-image", str(src), "--out", str(out)]) == 2
+
+
+def test_a_line_and_a_faint_picture_are_named_as_such(tmp_path):
+    line = np.full((200, 160), 255, np.uint8)
+    line[20:180, 80] = 0
+    with pytest.raises(InputError, match=r"the silhouette is [0-9.]+ px wide on average; at least 3 px"):
+        revolve_image(line)
+    faint = np.full((120, 100), 1200, np.uint16)
+    faint[20:100, 30:70] = 1000
+    with pytest.raises(InputError, match=r"the image has too little contrast \(grey values span 0\.0153\.\.0\.0183"):
+        revolve_image(faint)

@@ -49,7 +49,26 @@ def test_volume_command_writes_everything(tmp_path, drawings, capsys):
     assert len(trimesh.load(out / "mesh.ply", process=False, force="mesh").faces) == len(mesh.faces)
     with Image.open(out / "views.png") as png:
         assert png.size[0] > png.size[1] > 100
-    assert "IoU front" in err
+    assert "IoU front" in err and "disagree" not in err
+
+
+def test_drawings_that_disagree_are_written_with_a_warning(tmp_path, drawings, capsys):
+    # the top view narrowed to a third of its width: no solid shows all three
+    top = np.asarray(Image.open(drawings["top"]))
+    narrow = np.full_like(top, 255)
+    w = top.shape[1]
+    narrow[:, w // 3: w // 3 + w // 3] = np.asarray(Image.fromarray(top).resize((w // 3, top.shape[0])))
+    Image.fromarray(narrow).save(tmp_path / "narrow.png")
+    out = tmp_path / "fit"
+    rc = main(args({**drawings, "top": str(tmp_path / "narrow.png")}, out, "--control-size", "8", "--grid", "16",
+                   "--iters", "2", "--quiet"))
+    err = capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    worst = min(report["visual_hull_iou"], key=report["visual_hull_iou"].get)
+    assert rc == 0 and report["visual_hull_iou"][worst] < 0.9
+    assert err.startswith(f"nurbskit volume: warning: the drawings disagree: no solid shows the {worst} drawing "
+                          f"{drawings[worst] if worst != 'top' else tmp_path / 'narrow.png'} better than IoU "), err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_existing_output_needs_overwrite(tmp_path, drawings, capsys):

@@ -18,6 +18,10 @@ import sys
 from ._options import add_config_options, add_device_options, config_from_args, device_and_dtype
 from .export_command import add_format_option, check_format_options, write_requested_format
 
+#: The visual hull's IoU against each drawing below which the drawings are said to
+#: disagree (consistent drawings: 0.98 to 1.0 at the default grid, docs/volume.md).
+CONSISTENT_HULL_IOU = 0.9
+
 
 def register(subparsers) -> None:
     from ..volume.config import PRESETS, VolumeFitConfig, default_config
@@ -103,6 +107,14 @@ def run(args) -> int:
     if result.mesh.is_empty:
         sys.stderr.write(f"nurbskit volume: warning: {result.message}; wrote an empty mesh to {args.out}\n")
         return 1
+    worst = min(result.hull_iou, key=result.hull_iou.get)
+    if result.hull_iou[worst] < CONSISTENT_HULL_IOU:
+        # no solid can show every drawing: they disagree (sizes, placement, orientation)
+        sys.stderr.write(
+            f"nurbskit volume: warning: the drawings disagree: no solid shows the {worst} drawing "
+            f"{getattr(args, worst)} better than IoU {result.hull_iou[worst]:.2f} (the visual hull's; consistent "
+            f"drawings give {CONSISTENT_HULL_IOU} or more); check that the views share their extents and orientation\n"
+        )
     if not args.quiet:
         ious = ", ".join(f"{k} {v:.3f}" for k, v in result.iou.items())
         sys.stderr.write(

@@ -162,9 +162,9 @@ def ink_mask(grey: np.ndarray, source: str = "image") -> tuple[np.ndarray, bool]
     """
     from skimage.filters import threshold_otsu
 
-    if float(grey.max() - grey.min()) < 1.0 / 64:
-        raise InputError(f"{source}: the image is blank (grey values span {grey.min():.3g}..{grey.max():.3g}), "
-                         "expected dark strokes on a light background or light on dark")
+    from ..io.image import check_contrast
+
+    check_contrast(grey, source, "dark strokes on a light background or light on dark")
     t = threshold_otsu(grey)
     dark = grey <= t
     inverted = dark.sum() > dark.size / 2  # most pixels dark: light ink on a dark background

@@ -15,7 +15,9 @@ from three drawings); each pipeline opens its files itself, with its own memory 
 - Photographs are turned upright by their EXIF orientation, as every viewer shows them,
   so that pixel coordinates are those of the image the user sees.
 - Transparent pixels are paper: colour is composited onto white by its alpha, then
-  weighted to luma (ITU-R 601: 0.299 R + 0.587 G + 0.114 B, Pillow's ``L``).
+  weighted to luma (ITU-R 601: 0.299 R + 0.587 G + 0.114 B, Pillow's ``L``). When that
+  leaves no contrast but the alpha does (a white shape on a transparent ground), the
+  alpha is the drawing: opaque is ink.
 """
 
 from __future__ import annotations
@@ -44,8 +46,13 @@ def to_grey(image, source: str = "image") -> np.ndarray:
         if a.shape[-1] == 4:  # composite onto white: transparent means background
             alpha = a[..., 3].astype(np.float64)
             alpha = alpha / (alpha.max() if alpha.max() > 1 else 1.0)
-            rgb = rgb * alpha[..., None] + (white or 1.0) * (1 - alpha[..., None])
-        a = rgb @ _LUMA
+            grey = (rgb * alpha[..., None] + (white or 1.0) * (1 - alpha[..., None])) @ _LUMA
+            if np.ptp(grey) < MIN_CONTRAST * (white or 1.0) and np.ptp(alpha) >= 0.5:
+                # a light shape on a transparent ground vanishes on white: its alpha is the drawing
+                grey = (1 - alpha) * (white or 1.0)
+            a = grey
+        else:
+            a = rgb @ _LUMA
     if a.ndim != 2:
         raise InputError(f"{source}: expected an (H, W) grey or (H, W, 3|4) colour image, got shape {a.shape}")
     if a.size == 0:
@@ -59,6 +66,22 @@ def to_grey(image, source: str = "image") -> np.ndarray:
         lo, hi = a.min(), a.max()
         a = (a - lo) / (hi - lo) if hi > lo else np.zeros_like(a)
     return a
+
+
+#: The least grey-level range (of full scale) an image needs to hold a drawing.
+MIN_CONTRAST = 1.0 / 64
+
+
+def check_contrast(grey: np.ndarray, source: str, expected: str) -> None:
+    """An InputError naming ``source`` when ``grey`` (in [0, 1]) spans less than
+    :data:`MIN_CONTRAST`: blank when it holds one value, of too little contrast otherwise;
+    ``expected`` says what the pipeline looks for."""
+    lo, hi = float(grey.min()), float(grey.max())
+    if hi - lo >= MIN_CONTRAST:
+        return
+    what = "is blank" if hi == lo else "has too little contrast"
+    raise InputError(f"{source}: the image {what} (grey values span {lo:.3g}..{hi:.3g} of 0..1, "
+                     f"at least {MIN_CONTRAST:.3g} needed), expected {expected}")
 
 
 def _full_scale(a: np.ndarray) -> float | None:

@@ -49,6 +49,8 @@ __all__ = ["ImageRevolution", "revolve_image", "silhouette", "PIXEL_SIZE_RANGE"]
 
 AXES = ("vertical", "principal")
 MIN_ROWS = 8
+#: The least mean width (pixels) of a silhouette to read a profile from.
+MIN_WIDTH = 3
 PIXEL_SIZE_RANGE = (1e-50, 1e50)
 """Accepted ``pixel_size``: any image Pillow opens is under 1e9 pixels a side, so every length of
 the result (sub-pixel edges to the diagonal) and its fourth power (a surface normal's squared
@@ -106,9 +108,9 @@ def _silhouette(grey: np.ndarray, source: str) -> tuple[np.ndarray, tuple, str, 
     from skimage.filters import threshold_otsu
     from skimage.measure import label
 
-    if float(grey.max() - grey.min()) < 1.0 / 64:
-        raise InputError(f"{source}: the image is blank (grey values span {grey.min():.3g}..{grey.max():.3g}), "
-                         "expected the silhouette of an object on a light or dark background")
+    from ..io.image import check_contrast
+
+    check_contrast(grey, source, "the silhouette of an object on a light or dark background")
     t = float(threshold_otsu(grey))
     dark = grey <= t
     border = np.concatenate([dark[0], dark[-1], dark[:, 0], dark[:, -1]])
@@ -232,6 +234,9 @@ def revolve_image(image, *, axis: str = "vertical", symmetry_tolerance: float = 
         raise InputError(f"{source}: the silhouette spans {rows.shape[0]} rows; at least {MIN_ROWS} are needed")
     mid = 0.5 * (rows[:, 1] + rows[:, 2])
     width = rows[:, 2] - rows[:, 1]
+    if float(width.mean()) < MIN_WIDTH:
+        raise InputError(f"{source}: the silhouette is {max(float(width.mean()), 0.0):.1f} px wide on average; "
+                         f"at least {MIN_WIDTH} px are needed (a line has no profile to turn)")
     c = float(mid.mean())
     dev = mid - c
     sym_rms = float(np.sqrt((dev ** 2).mean()))
