@@ -218,3 +218,23 @@ def test_a_manifest_naming_files_outside_its_folder_is_not_trusted(tmp_path, nam
         with output_directory(out, overwrite=True) as d:
             (d / "s.txt").write_text("s")
     assert victim.read_text() == "precious"
+
+
+def test_atomic_paths_writes_a_set_whole_and_leaves_no_folder_it_made(tmp_path):
+    from nurbskit._fs import atomic_paths
+
+    target = [tmp_path / "new" / "deep" / "a.txt", tmp_path / "new" / "deep" / "a.json"]
+    with pytest.raises(RuntimeError):
+        with atomic_paths(target) as temps:
+            temps[0].write_text("half")
+            raise RuntimeError("the second file failed")
+    assert list(tmp_path.iterdir()) == []  # neither file, nor the folders made for them
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(RuntimeError):
+        with atomic_paths([tmp_path / "kept" / "x.txt"]):
+            raise RuntimeError
+    assert (tmp_path / "kept").is_dir() and list((tmp_path / "kept").iterdir()) == []
+    with atomic_paths(target) as temps:
+        for t, text in zip(temps, ("a", "b")):
+            t.write_text(text)
+    assert [p.read_text() for p in target] == ["a", "b"] and len(list(target[0].parent.iterdir())) == 2

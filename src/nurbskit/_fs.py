@@ -73,10 +73,14 @@ def atomic_paths(paths) -> Iterator[list[Path]]:
     """
     paths = [Path(p) for p in paths]
     temps: list[Path] = []
+    made: list[Path] = []  # folders this call made, deepest last: removed again on failure
+    done = False
     try:
         for path in paths:
+            missing = [f for f in (path.parent, *path.parent.parents) if not f.exists()]
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
+                made += [f for f in reversed(missing) if f not in made]
             except OSError as exc:
                 why = "a file of that name is in the way" if isinstance(exc, FileExistsError) else exc.strerror
                 raise OSError(exc.errno, f"its folder cannot be made ({why})", str(path)) from None
@@ -98,10 +102,14 @@ def atomic_paths(paths) -> Iterator[list[Path]]:
                 # mkstemp creates 0600 files; give the result the mode a plain open() would.
                 os.chmod(tmp, 0o666 & ~_umask())
                 os.replace(tmp, path)
+        done = True
     finally:
         for tmp in temps:  # the renamed ones are gone already
             with contextlib.suppress(FileNotFoundError):
                 tmp.unlink()
+        for folder in reversed(made) if not done else ():
+            with contextlib.suppress(OSError):  # only if still empty
+                folder.rmdir()
 
 
 @contextlib.contextmanager
