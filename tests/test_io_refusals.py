@@ -151,3 +151,15 @@ def test_a_broken_step_file_prints_nothing_on_stdout(tmp_path, capfd):
     assert run(["info", str(bad)]) == 2
     out, err = capfd.readouterr()
     assert out == "" and one_line(err) and "could not read it as STEP" in err, (out, err)
+
+
+@pytest.mark.parametrize("extra, out, says", [
+    (["--pcd-data", "ascii"], "x.ply", "--pcd-data applies to a .pcd output, not '.ply'"),
+    (["--geomdl"], "x.xyz", "--geomdl applies to a .json output"),
+    (["--ascii"], "x.npy", "--ascii applies to .ply, .stl and .pcd outputs"),
+])
+def test_convert_refuses_options_its_output_ignores(tmp_path, capsys, extra, out, says):
+    src = tmp_path / "p.xyz"
+    np.savetxt(src, np.random.default_rng(0).random((20, 3)))
+    refused(capsys, ["convert", src, tmp_path / out, *extra], says)
+    assert not (tmp_path / out).exists()

@@ -230,6 +230,12 @@ def run_convert(args) -> int:
         + ([out.with_suffix(".weights")] if out_ext == ".ctrlpts" else [])
     for written in outputs:
         check_not_input(written, _inputs(args, src))
+    if args.pcd_data is not None and out_ext != ".pcd":
+        raise OptionError(f"--pcd-data applies to a .pcd output, not {out_ext or 'no extension'!r}")
+    if args.geomdl and out_ext != ".json":
+        raise OptionError(f"--geomdl applies to a .json output (geomdl's JSON), not {out_ext or 'no extension'!r}")
+    if args.ascii and out_ext not in (".ply", ".stl", ".pcd"):
+        raise OptionError(f"--ascii applies to .ply, .stl and .pcd outputs; {out_ext or 'no extension'!r} has one form")
     with _progress(2, "convert") as bar:
         if is_nurbs_file(src):
             obj = read_nurbs(src, **_nurbs_kwargs(args))
