@@ -143,7 +143,7 @@ def test_fewer_controls_hint():
 
 def test_shape_small_cloud_names_the_file_and_what_shape_can_do(cloud, tmp_path, capsys):
     path = cloud(40)
-    err = refused(capsys, ["shape", path, "--out", tmp_path / "o", "--iters", "0", "--no-figures"],
+    err = refused(capsys, ["shape", path, "--out", tmp_path / "o", "--iters", "0", "--no-figures", "--quiet"],
                   f"{path}: ", "--kind revolution or --kind extrusion", "nurbskit fit INPUT --ctrl 6x6")
     assert not (tmp_path / "o").exists()
 

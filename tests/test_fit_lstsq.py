@@ -247,3 +247,29 @@ def test_a_fit_iteration_after_the_first_reads_nothing_back():
     for c in counts[1:]:
         assert c.host_reads == 0, c.host_read_names()
     assert set(parts) == {"point_to_surface", "coverage", "smoothness"}
+
+
+@pytest.mark.parametrize("topology", [Topology(), Topology(closed_v=True), Topology(closed_v=True, pole_start=True, pole_end=True)],
+                         ids=["open", "closed", "poles"])
+def test_large_nets_solve_sparse_as_the_dense_system_does(topology, monkeypatch):
+    # Large systems without gradients on the CPU (lstsq.solves_sparse) are assembled and
+    # solved as sparse matrices: the same solution as the dense solve.
+    from nurbskit.fit import lstsq
+
+    g = torch.Generator().manual_seed(11)
+    n = (33, 32)
+    s = NURBSSurface(torch.rand(*n, 3, dtype=torch.float64, generator=g), (3, 3),
+                     weights=torch.rand(*n, dtype=torch.float64, generator=g) + 0.5)
+    uv = torch.rand(3000, 2, dtype=torch.float64, generator=g)
+    X = s.evaluate(uv) + 0.01 * torch.randn(3000, 3, dtype=torch.float64, generator=g)
+    args = (uv, X, s.knot_vectors, s.degrees, s.sizes, s.weights, topology, 1e-3)
+    assert lstsq.solves_sparse(3000, n[0] * n[1], "cpu") and not lstsq.solves_sparse(300, 64, "cpu")
+    with torch.no_grad():
+        sparse = lstsq.solve_control_points(*args)
+        monkeypatch.setattr(lstsq, "solves_sparse", lambda *_: False)
+        dense = lstsq.solve_control_points(*args)
+    assert_close(sparse, dense, atol=1e-10 * float(dense.abs().max()))
+    # with gradients wanted, the dense (differentiable) solve runs whatever the size
+    monkeypatch.setattr(lstsq, "solves_sparse", lambda *_: True)
+    cp = lstsq.solve_control_points(uv, X, s.knot_vectors, s.degrees, s.sizes, s.weights.requires_grad_(), topology, 1e-3)
+    assert cp.requires_grad

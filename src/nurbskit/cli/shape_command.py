@@ -134,7 +134,7 @@ def run_shape(args) -> int:
     normals = None if cloud.normals is None else torch.as_tensor(cloud.normals, dtype=torch.float64)
     from ._progress import StageBars
 
-    bars = StageBars(args.quiet)
+    bars = StageBars(args.quiet, delay=0.5)  # the exact fits take a second: no flicker before a quick answer
     try:
         fit = fit_shape(points, args.kind, normals, iterations=args.iters, refine=args.iters > 0, init=args.init,
                         progress=bars)

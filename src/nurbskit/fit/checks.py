@@ -20,6 +20,7 @@ from ..core import NURBSSurface
 from ..errors import NurbskitError, OptionError
 from .config import FitConfig
 from .loop import Target, stage_resolution
+from .lstsq import solves_sparse
 
 Tensor = torch.Tensor
 
@@ -47,7 +48,9 @@ def fit_bytes(cfg: FitConfig, target: Target, ctrl: tuple[int, int], resolution:
 
     Terms: the least-squares solve (a dense design matrix ``(M, k)`` built in three
     copies, the normal and smoothness matrices ``(k, k)`` several times, ``k`` control
-    points and ``M`` fitted points); each stage's sampled grid with its autograd
+    points and ``M`` fitted points; where :func:`~nurbskit.fit.lstsq.solves_sparse`, its
+    sparse form: the design matrix's non-zeros, the banded normal matrix
+    and LU factors of about ``(p + 1) min(n_u, n_v)`` entries a row, with their indices); each stage's sampled grid with its autograd
     intermediates (about 30 values per sample and coordinate); the UM matching's cost
     matrix (samples x points, float64).
     """
@@ -57,7 +60,13 @@ def fit_bytes(cfg: FitConfig, target: Target, ctrl: tuple[int, int], resolution:
     total = 0.0
     if _uses_least_squares(cfg):
         rows = m if not target.supervised else target.grid.shape[0] * target.grid.shape[1]
-        total += item * (3.0 * rows * k + 8.0 * k * k)
+        sparse = solves_sparse(rows, k, target.points.device) and not any(s.eliminate_control_points for s in cfg.stages)
+        if sparse:  # lstsq's sparse solve: (p+1)(q+1) entries a row, a banded normal matrix and its LU factors
+            p, q = cfg.degree or (3, 3)
+            total += 16.0 * (3 * rows * (p + 1) * (q + 1) + 4 * k * (2 * p + 1) * (2 * q + 1)
+                             + 4 * k * (max(p, q) + 1) * min(ctrl))
+        else:
+            total += item * (3.0 * rows * k + 8.0 * k * k)
     grids = [tuple(resolution)] + [stage_resolution(s, target, tuple(resolution)) for s in cfg.stages]
     total += max(grid_bytes(g, item) for g in grids)
     for s in cfg.stages:

@@ -64,12 +64,10 @@ def design_matrix(
     return a.new_zeros(a.shape[0], k).index_add(1, index, a), index, k
 
 
-def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None, device=None) -> Tensor:
-    """Second-difference operator of a control net, ``(rows, n_u * n_v)``.
-
-    Rows ``P[i-1, j] - 2 P[i, j] + P[i+1, j]`` along u and the same along v (with
-    wrap-around when ``closed_v``; ``n_v`` then counts the distinct columns).
-    """
+def difference_stencils(n_u: int, n_v: int, closed_v: bool = False, device=None) -> tuple[Tensor, Tensor, Tensor]:
+    """The control points ``(a, b, c)`` of every second difference ``P_a - 2 P_b + P_c`` of a
+    net (u-major indices, ``(rows,)`` each): along u, then along v (with wrap-around when
+    ``closed_v``; ``n_v`` then counts the distinct columns)."""
     rows = []
     idx = torch.arange(n_u * n_v, device=device).reshape(n_u, n_v)
     for i in range(1, n_u - 1):
@@ -78,10 +76,15 @@ def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None
     for j in js:
         rows.append((idx[:, (j - 1) % n_v], idx[:, j], idx[:, (j + 1) % n_v]))
     if not rows:
-        return torch.zeros(0, n_u * n_v, dtype=dtype, device=device)
-    a = torch.cat([r[0] for r in rows])
-    b = torch.cat([r[1] for r in rows])
-    c = torch.cat([r[2] for r in rows])
+        empty = torch.zeros(0, dtype=torch.int64, device=device)
+        return empty, empty, empty
+    return tuple(torch.cat([r[t] for r in rows]) for t in range(3))
+
+
+def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None, device=None) -> Tensor:
+    """Second-difference operator of a control net, ``(rows, n_u * n_v)`` (dense; the rows
+    of :func:`difference_stencils`)."""
+    a, b, c = difference_stencils(n_u, n_v, closed_v, device)
     n = a.numel()
     D = torch.zeros(n, n_u * n_v, dtype=dtype or torch.get_default_dtype(), device=device)
     r = torch.arange(n, device=device)
@@ -89,6 +92,67 @@ def second_differences(n_u: int, n_v: int, closed_v: bool = False, *, dtype=None
     D[r, b] -= 2.0
     D[r, c] += 1.0
     return D
+
+
+#: A least-squares solve that needs no gradient, on the CPU, runs on sparse matrices
+#: (scipy's SuperLU) from this many unknowns, or from this many entries of the dense
+#: design matrix ``(M, k)``: a point touches (p + 1)(q + 1) control points, so the design
+#: matrix has that many non-zeros a row and the normal matrix is banded. Measured
+#: (``benchmarks/bench_lstsq_sparse.py``, two runs on a shared machine): the dense solve
+#: of a 16 x 16 net on 20,000 points took 6 to 11 times the sparse one, of a 100 x 100
+#: net 110 to 190 times (and 10 GB); below these sizes (a patch's few hundred points)
+#: scipy's overhead of about a millisecond a solve can lose.
+SPARSE_UNKNOWNS = 256
+SPARSE_ENTRIES = 1 << 21
+
+
+def solves_sparse(points: int, unknowns: int, device) -> bool:
+    """Whether :func:`solve_control_points` takes the sparse path for ``points`` x
+    ``unknowns`` on ``device`` (when no gradient is wanted)."""
+    return torch.device(device).type == "cpu" and (unknowns >= SPARSE_UNKNOWNS or points * unknowns >= SPARSE_ENTRIES)
+
+
+def _sparse_system(params, points, knot_vectors, degrees, sizes, weights, topo, smoothness):
+    """The regularised normal equations of :func:`solve_control_points` as scipy sparse
+    matrices (float64): ``(AtA (k, k) CSC, rhs (k, dim), index, k)``."""
+    import numpy as np
+    from scipy import sparse
+
+    from ..core.basis import basis_functions
+    from ..core.knots import find_spans
+
+    n_u, n_v = sizes
+    p, q = degrees
+    index, k = topo.index(n_u, n_v, q)
+    local = []
+    for kv, d, n, u in zip(knot_vectors, degrees, sizes, params.unbind(-1)):
+        span = find_spans(kv, d, n, u)
+        local.append((span.unsqueeze(-1) - d + torch.arange(d + 1), basis_functions(kv, d, span, u)))
+    (iu, bu), (iv, bv) = local
+    a = bu.unsqueeze(2) * bv.unsqueeze(1)  # (M, p + 1, q + 1): each point's non-zero basis products
+    full = iu.unsqueeze(2) * n_v + iv.unsqueeze(1)  # their control points (u-major)
+    if weights is not None:
+        a = a * weights.reshape(-1)[full]
+        a = a / a.sum(dim=(1, 2), keepdim=True)
+    m = params.shape[0]
+    rows = torch.arange(m).reshape(m, 1, 1).expand_as(full)
+    A = sparse.csr_matrix(
+        (a.detach().double().reshape(-1).numpy(), (rows.reshape(-1).numpy(), index[full].reshape(-1).numpy())),
+        shape=(m, k))  # tied control points (a seam, a pole) add up in their unknown
+    AtA = (A.T @ A).tocsc()
+    rhs = A.T @ points.detach().double().cpu().numpy()
+    trace = AtA.diagonal().sum()
+    if smoothness > 0:
+        cols = n_v - q if topo.closed_v else n_v
+        first = index.reshape(n_u, n_v)[:, :cols].reshape(-1).numpy()
+        stencil = [first[t.numpy()] for t in difference_stencils(n_u, cols, topo.closed_v)]
+        r = np.arange(len(stencil[0]))
+        D = sparse.csr_matrix((np.repeat([1.0, -2.0, 1.0], len(r)), (np.tile(r, 3), np.concatenate(stencil))),
+                              shape=(len(r), k))
+        DtD = (D.T @ D).tocsc()
+        AtA = AtA + (smoothness * trace / max(DtD.diagonal().sum(), 1e-30)) * DtD
+    AtA = AtA + (1e-12 * trace / k) * sparse.identity(k, format="csc")
+    return AtA.tocsc(), rhs, index, k
 
 
 def solve_control_points(
@@ -106,7 +170,9 @@ def solve_control_points(
     Shapes: ``params (M, 2)``, ``points (M, dim)`` -> ``(n_u, n_v, dim)`` (the full net,
     respecting the ties of ``topology``; a bool means ``closed_v``). ``smoothness`` is
     relative (see the module docstring); with ``smoothness=0`` and enough well-spread
-    points the fit reproduces any surface of the same knots and weights exactly.
+    points the fit reproduces any surface of the same knots and weights exactly. Large
+    systems solved without gradients on the CPU (:func:`solves_sparse`: the alternation,
+    the initial fit) go through sparse matrices: the same system, solved in float64.
 
     Example:
         >>> import torch
@@ -119,6 +185,14 @@ def solve_control_points(
     """
     topo = _topology(topology)
     n_u, n_v = sizes
+    differentiable = torch.is_grad_enabled() and any(
+        t is not None and t.requires_grad for t in (params, points, weights, *knot_vectors))
+    if not differentiable and solves_sparse(params.shape[0], n_u * n_v, params.device):
+        from scipy.sparse.linalg import spsolve
+
+        AtA, rhs, index, k = _sparse_system(params, points, knot_vectors, degrees, sizes, weights, topo, smoothness)
+        P = torch.from_numpy(spsolve(AtA, rhs).reshape(k, -1)).to(points.dtype)
+        return expand(P, index, n_u, n_v)
     A, index, k = design_matrix(params, knot_vectors, degrees, sizes, weights, topo)
     AtA = A.T @ A
     rhs = A.T @ points
