@@ -238,3 +238,21 @@ def test_atomic_paths_writes_a_set_whole_and_leaves_no_folder_it_made(tmp_path):
         for t, text in zip(temps, ("a", "b")):
             t.write_text(text)
     assert [p.read_text() for p in target] == ["a", "b"] and len(list(target[0].parent.iterdir())) == 2
+
+
+def test_overwrite_replaces_only_the_same_commands_output(tmp_path, monkeypatch):
+    import nurbskit._fs as fs
+
+    out = tmp_path / "o"
+    monkeypatch.setattr(fs, "COMMAND", "nurbskit curves")
+    with output_directory(out) as tmp:
+        (tmp / "curves.json").write_text("{}")
+    assert json.loads((out / MANIFEST).read_text())["command"] == "nurbskit curves"
+    monkeypatch.setattr(fs, "COMMAND", "nurbskit train")
+    with pytest.raises(OptionError, match="holds the outputs of nurbskit curves; --overwrite replaces only an earlier "
+                                          "nurbskit train's"):
+        check_output_dir(out, overwrite=True)
+    monkeypatch.setattr(fs, "COMMAND", "nurbskit curves")
+    assert check_output_dir(out, overwrite=True) == out
+    monkeypatch.setattr(fs, "COMMAND", None)  # library use: nothing recorded, nothing compared
+    assert check_output_dir(out, overwrite=True) == out

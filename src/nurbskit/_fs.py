@@ -14,7 +14,9 @@ Convention (the output-folder rules, as the README states them for users):
   every file in it is one nurbskit wrote there (listed in its manifest, unchanged in
   size). Then exactly those files are removed and the new run's files put in their
   place. Anything else in the folder, a file nurbskit did not write, a file changed
-  since, a folder without a manifest, refuses the run, whatever the flags.
+  since, a folder without a manifest, refuses the run, whatever the flags; so does a
+  folder another command wrote (the manifest records the command: ``train
+  --overwrite`` does not replace the output of ``curves``).
 * A folder that holds an input of the run (at any depth) is refused, whatever the flags.
 * Nothing is left behind by a failed or interrupted run: the run's files are built in a
   hidden staging folder inside the output folder (``.nurbskit-partial-<pid>-*``, so
@@ -40,6 +42,9 @@ from typing import Iterable, Iterator
 from .errors import OptionError
 
 MANIFEST = ".nurbskit-manifest.json"
+#: The running command (``"nurbskit fit"``), recorded in the manifests it writes; set by
+#: the command line, None in library use (then nothing is recorded or compared).
+COMMAND: str | None = None
 _PARTIAL = ".nurbskit-partial-"
 _SHOWN = 3  # foreign file names quoted in a refusal
 
@@ -150,11 +155,24 @@ def read_manifest(folder: Path) -> dict[str, int] | None:
         return None
 
 
+def manifest_command(folder: Path) -> str | None:
+    """The command that wrote ``folder``'s manifest (``"nurbskit curves"``), or None when
+    it is not recorded (library use, or a manifest older than the record)."""
+    try:
+        command = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("command")
+    except (OSError, ValueError, AttributeError, RecursionError):
+        return None
+    return command if isinstance(command, str) else None
+
+
 def write_manifest(folder: Path, files: dict[str, int]) -> None:
     """Write ``folder``'s manifest (atomically): ``files`` maps each file this run wrote,
     as a path relative to ``folder`` (posix), to its size in bytes."""
+    data = {"format": "nurbskit-output", "version": 1, "files": files}
+    if COMMAND:
+        data["command"] = COMMAND
     with atomic_open(folder / MANIFEST, "w", encoding="utf-8") as handle:
-        json.dump({"format": "nurbskit-output", "version": 1, "files": files}, handle, indent=1)
+        json.dump(data, handle, indent=1)
         handle.write("\n")
 
 
@@ -268,6 +286,12 @@ def check_output_dir(path: str | os.PathLike, overwrite: bool = False, *,
     if not overwrite:
         raise OptionError(
             f"{where}: the folder holds the outputs of an earlier run; pass --overwrite to replace them"
+        )
+    theirs = manifest_command(folder)
+    if theirs and COMMAND and theirs != COMMAND:
+        raise OptionError(
+            f"{where}: the folder holds the outputs of {theirs}; --overwrite replaces only an earlier "
+            f"{COMMAND}'s: choose another folder"
         )
     return path
 

@@ -19,6 +19,7 @@ import sys
 import threading
 import traceback
 
+from .. import _fs
 from ..errors import NurbskitError
 
 # Command modules, imported lazily by name so that `nurbskit info` does not load the fitter.
@@ -141,7 +142,11 @@ def _main(argv: list[str] | None) -> int:
             parser.print_help(sys.stderr)
             return EXIT_USER_ERROR
         command = f"nurbskit {args.command}"
-        return int(args.run(args) or 0)
+        _fs.COMMAND = command  # recorded in the output folders' manifests (for this call only)
+        try:
+            return int(args.run(args) or 0)
+        finally:
+            _fs.COMMAND = None
     except NurbskitError as exc:
         if _RECEIVED:
             return _signalled(command)
