@@ -223,7 +223,7 @@ def test_loss_weights_and_iterations_from_the_panel():
                                             ("::1", True), ("0.0.0.0", False), ("192.168.1.5", False),
                                             ("example.org", False), ("::", False)])
 def test_only_loopback_hosts_go_without_a_warning(host, loopback):
-    from nurbskit.cli.studio_command import is_loopback
+    from nurbskit.studio.guard import is_loopback
 
     assert is_loopback(host) is loopback
 
@@ -443,5 +443,58 @@ def test_widget_defaults_are_the_librarys(tmp_path):
         assert curves.refine_iters.value == sig["refine_iterations"].default
         assert tuple(curves.method.options) == tuple(METHODS) and curves.method.value == sig["method"].default
         assert page.tabs["Unsupervised"].pipeline.value == "default"
+    finally:
+        s.stop()
+
+
+def test_requests_from_other_sites_are_refused(tmp_path):
+    # A page from another site may open ws://127.0.0.1:PORT in the user's browser; a name
+    # pointed at 127.0.0.1 (DNS rebinding) arrives with its own Host. Both get 403; the
+    # studio's own page (Origin = its Host) and clients that send no Origin connect.
+    import asyncio
+    import socket
+
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    from nurbskit.studio.app import Studio, StudioOptions
+    from nurbskit.studio.guard import refusal
+
+    assert refusal({"Host": "127.0.0.1:8080", "Origin": "http://127.0.0.1:8080"}, True) is None
+    assert refusal({"Host": "localhost:8080"}, True) is None
+    assert "another site" in refusal({"Host": "127.0.0.1:8080", "Origin": "http://evil.example"}, True)
+    assert "not a loopback name" in refusal({"Host": "evil.example:8080", "Origin": "http://evil.example:8080"}, True)
+    assert refusal({"Host": "studio.lan:8080", "Origin": "http://studio.lan:8080"}, False) is None
+
+    import viser
+
+    s = Studio(StudioOptions(host="127.0.0.1", port=0, workdir=tmp_path)).start()
+    try:
+        port = s.server.get_port()
+
+        async def status(**headers) -> int:
+            try:
+                async with connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], additional_headers=headers,
+                                   open_timeout=20):
+                    return 101
+            except InvalidStatus as exc:
+                return exc.response.status_code
+
+        assert asyncio.run(status(Origin=f"http://127.0.0.1:{port}")) == 101
+        assert asyncio.run(status()) == 101
+        assert asyncio.run(status(Origin="http://evil.example")) == 403
+
+        def raw(host: str, origin: str) -> str:  # a handshake whose Host a client chose (DNS rebinding)
+            with socket.create_connection(("127.0.0.1", port), timeout=20) as sock:
+                sock.sendall((f"GET / HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                              "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+                              f"Sec-WebSocket-Protocol: viser-v{viser.__version__}\r\nOrigin: {origin}\r\n\r\n").encode())
+                return sock.recv(200).decode("latin-1").split("\r\n")[0]
+
+        assert raw(f"evil.example:{port}", f"http://evil.example:{port}").startswith("HTTP/1.1 403")
+        assert raw(f"localhost:{port}", f"http://localhost:{port}").startswith("HTTP/1.1 101")
     finally:
         s.stop()

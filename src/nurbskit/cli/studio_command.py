@@ -20,23 +20,12 @@ import time
 from pathlib import Path
 
 from ..errors import OptionError
+from ..studio.guard import is_loopback
 
 MAX_UPLOAD_MB = 10240.0
 """The largest ``--max-upload-mb`` (10 GiB): an upload is held whole in memory, in the browser and here."""
 
 MEBIBYTE = 1024 * 1024
-
-
-def is_loopback(host: str) -> bool:
-    """True for addresses only this machine reaches (127.0.0.0/8, ::1, localhost)."""
-    import ipaddress
-
-    if host.strip().lower() == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
 
 
 def _port(text: str) -> int:

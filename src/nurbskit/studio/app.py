@@ -613,6 +613,9 @@ class Studio:
         needs the code before then waits for it.
         """
         viser = require("viser", "studio", "nurbskit studio")
+        from .guard import install
+
+        install()  # requests from other web sites refused (viser checks no Origin)
         self.server = viser.ViserServer(host=self.options.host, port=self.options.port, verbose=False)
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
         # No HDRI environment (a texture download the machine may not reach, and slow in
