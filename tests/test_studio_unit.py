@@ -498,3 +498,42 @@ def test_requests_from_other_sites_are_refused(tmp_path):
         assert raw(f"localhost:{port}", f"http://localhost:{port}").startswith("HTTP/1.1 101")
     finally:
         s.stop()
+
+
+def test_a_clients_widget_values_are_checked_on_the_server():
+    # viser applies what a client sends; the studio first keeps only the value, and only
+    # one the widget offers: numbers clamped into [min, max], choices among the options.
+    import asyncio
+
+    from _extras import require_extra
+
+    require_extra("viser", "studio")
+    import viser
+    from viser import _messages
+
+    from nurbskit.studio.guard import check_client_updates
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        gui = server.gui
+        number = gui.add_number("samples", 5, min=1, max=64, step=1)
+        grid = gui.add_vector2("grid", (15, 15), min=(2, 2), max=(64, 64), step=1)
+        device = gui.add_dropdown("device", ("cpu",), initial_value="cpu")
+        assert check_client_updates(gui)
+
+        def send(handle, **updates):
+            message = _messages.GuiUpdateMessage(handle._impl.uuid, updates)
+            asyncio.run(gui._websock_interface._handle_incoming_message("client", message))
+
+        send(number, value=2000, max=10**9)
+        assert number.value == 64 and number.max == 64
+        send(number, value=float("nan"))
+        assert number.value == 64
+        send(grid, value=(2000, 1))
+        assert grid.value == (64, 2)
+        send(device, value="cuda:7", options=("cpu", "cuda:7"))
+        assert device.value == "cpu" and tuple(device.options) == ("cpu",)
+        send(number, value=12)
+        assert number.value == 12
+    finally:
+        server.stop()

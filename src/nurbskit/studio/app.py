@@ -464,6 +464,9 @@ class Session:
         self.active = False
         self._files: tuple[str, ...] | None = None
         self._refuse_large_uploads()
+        from .guard import check_client_updates
+
+        check_client_updates(self.client.gui)  # a widget's value must be one it offers
         client.scene.set_up_direction("+z")
         with client.gui.add_folder("nurbskit studio", expand_by_default=True):
             self.loading = None if studio.ready.is_set() else client.gui.add_markdown(
@@ -515,11 +518,12 @@ class Session:
                 root.visible = name == label
 
     def _refuse_large_uploads(self) -> None:
-        """Drop an upload whose declared size is over the limit before its bytes arrive.
+        """Drop an upload whose declared size is over the limit before its bytes arrive,
+        and one whose parts add up to more than it declared.
 
-        viser buffers an upload in memory until it is complete; this handler runs after
-        viser's own handler of the transfer's first message and forgets the transfer, so
-        the remaining parts are discarded as they come. (Uses viser's upload table; if
+        viser buffers an upload in memory until it is complete; these handlers run after
+        viser's own handlers of the transfer's messages and forget the transfer, so the
+        remaining parts are discarded as they come. (Uses viser's upload table; if
         that ever changes, the size check after the upload still refuses the file.)
         """
         from viser import _messages
@@ -542,6 +546,16 @@ class Session:
                 status.error(too_large(message.filename, message.size_bytes, limit))
 
         gui._websock_interface.register_handler(_messages.FileTransferStartUpload, check)
+
+        def count(client_id, message) -> None:
+            # The declared size is the client's word: a transfer whose parts add up to more
+            # than it declared, or than the limit, is forgotten (its bytes freed) at once.
+            states = getattr(gui, "_current_file_upload_states", None)
+            state = states.get(message.transfer_uuid) if isinstance(states, dict) else None
+            if state is not None and state.get("transferred_bytes", 0) > min(limit, state.get("total_bytes", 0)):
+                states.pop(message.transfer_uuid, None)
+
+        gui._websock_interface.register_handler(_messages.FileTransferPart, count)  # after viser's own
 
     def show(self, label: str) -> None:
         """Show tab ``label``'s objects and point the camera at them."""

@@ -74,3 +74,83 @@ def install() -> None:
 
     guarded.nurbskit_guard = True
     server.serve = guarded
+
+
+# ---- what a client sends --------------------------------------------------------------
+# viser applies a client's widget update as sent: any property (a client may raise a
+# slider's max), any number (a 2,000 x 2,000 grid from a widget whose slider stops at
+# 64), any choice (a dropdown value that is not an option). The studio checks each
+# update against what the widget offers on the server before viser applies it.
+
+
+def checked_value(props, value):
+    """``value`` as a widget with server-side properties ``props`` (its ``min``, ``max``,
+    ``options``) may hold it: numbers clamped into ``[min, max]``, elementwise for
+    vectors; None when it cannot be (NaN, a choice that is not an option, a wrong length).
+
+    Example:
+        >>> from types import SimpleNamespace as P
+        >>> checked_value(P(min=2, max=64), 2000), checked_value(P(min=(2, 2), max=(64, 64)), (1, 9))
+        (64, (2, 9))
+        >>> checked_value(P(options=("cpu",)), "cuda:7") is None
+        True
+    """
+    import math
+
+    options = getattr(props, "options", None)
+    if options is not None:
+        return value if value in tuple(options) else None
+    low, high = getattr(props, "min", None), getattr(props, "max", None)
+
+    def clamp(x, lo, hi):
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            return x
+        if isinstance(x, float) and math.isnan(x):
+            return None
+        x = x if lo is None else max(x, lo)
+        return x if hi is None else min(x, hi)
+
+    if isinstance(value, (tuple, list)):
+        n = len(value)
+        lows = low if isinstance(low, (tuple, list)) else (low,) * n
+        highs = high if isinstance(high, (tuple, list)) else (high,) * n
+        if len(lows) != n or len(highs) != n:
+            return None
+        out = tuple(clamp(x, lo, hi) for x, lo, hi in zip(value, lows, highs))
+        return None if any(x is None for x in out) else out
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return clamp(value, low, high)
+    return value
+
+
+def check_client_updates(gui) -> bool:
+    """Check every widget update a client of ``gui`` (a viser client's GUI API) sends before
+    viser applies it: only ``value`` is a client's to set, and it must be one the widget
+    offers (:func:`checked_value`). Returns False when viser's internals are not those
+    this was written against (then nothing is checked here; the tabs' own checks remain)."""
+    from viser import _messages
+
+    handles = getattr(gui, "_gui_input_handle_from_uuid", None)
+    interface = getattr(gui, "_websock_interface", None)
+    handlers = getattr(interface, "_incoming_handlers", None)
+    if not isinstance(handles, dict) or not isinstance(handlers, dict):
+        return False
+
+    def check(client_id, message) -> None:
+        handle = handles.get(message.uuid)
+        if handle is None or not isinstance(message.updates, dict):
+            return
+        impl = handle._impl
+        updates = {"value": message.updates["value"]} if "value" in message.updates else {}
+        if "value" in updates and not impl.is_button:
+            props = getattr(impl, "props", impl)
+            value = checked_value(props, updates["value"])
+            if value is None:
+                del updates["value"]
+            else:
+                updates["value"] = value
+        message.updates.clear()
+        message.updates.update(updates)
+
+    handlers.setdefault(_messages.GuiUpdateMessage, []).insert(0, check)  # before viser's own handler
+    return True
