@@ -322,7 +322,7 @@ class Extraction:
 
 
 def curves_from_image(image, method: str = DEFAULT_METHOD, tolerance: float = 1.0, refine: bool = False,
-                      refine_iterations: int = 20, mode: str = "MV") -> list:
+                      refine_iterations: int = 20, mode: str = "MV", progress=None) -> list:
     """B-spline curves drawn in ``image``, in pixel coordinates (see the module's convention).
 
     Args:
@@ -339,6 +339,8 @@ def curves_from_image(image, method: str = DEFAULT_METHOD, tolerance: float = 1.
         refine_iterations: L-BFGS iterations of the refinement.
         mode: the network: ``"V"`` one curve of 4-6 control points, ``"M"`` 1-3 curves of
             5, ``"MV"`` 1-3 curves of 4-6 (the default).
+        progress: None, or called as ``progress(stage, done, total)`` as the stages go
+            (see :func:`extract`); an exception it raises ends the call.
 
     Returns:
         A list of :class:`~nurbskit.NURBSCurve` (float64, 2D), one per stroke.
@@ -357,5 +359,5 @@ def curves_from_image(image, method: str = DEFAULT_METHOD, tolerance: float = 1.
         source = str(image)
         image = read_image(image)
     curves, _ = extract(to_grey(image, source), method=method, mode=mode, tolerance=tolerance, refine=refine,
-                        refine_iterations=refine_iterations, source=source)
+                        refine_iterations=refine_iterations, source=source, progress=progress)
     return curves

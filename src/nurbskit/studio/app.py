@@ -226,6 +226,8 @@ class RunPanel:
 
         try:
             result = self.start(progress, self.stop_event)
+            if self.stop_event.is_set():  # Stop pressed after the run's last report: keep nothing
+                raise Stopped()
             self._show_progress(1.0)
             self.done(result)
         except Stopped:

@@ -540,7 +540,8 @@ class ShapeTab(CloudTab):
         points = self.need_points()
         progress(0.0)
         iters = int(self.iters.value)
-        return fit_shape(points, self.kind.value, refine=iters > 0, iterations=max(iters, 1))
+        return fit_shape(points, self.kind.value, refine=iters > 0, iterations=max(iters, 1),
+                         progress=lambda stage, done, total: progress(min(0.99, done / max(1, total))))
 
     def _done(self, fit) -> None:
         self.fit = fit
@@ -708,9 +709,10 @@ class CurvesTab(TabBase):
         kwargs = self.kwargs()
         progress(0.0)
         t0 = time.perf_counter()
-        curves = nurbskit.curves_from_image(self.grey, **kwargs)
+        curves = nurbskit.curves_from_image(
+            self.grey, **kwargs, progress=lambda stage, done, total: progress(min(0.89, 0.9 * done / max(1, total))))
         seconds = time.perf_counter() - t0
-        progress(0.9)  # raises Stopped when Stop was pressed meanwhile (the call itself has no callback)
+        progress(0.9)  # raises Stopped when Stop was pressed meanwhile
         ink, inverted = ink_mask(even_background(self.grey), self.name)  # the ink the curves were read from
         h, w = self.grey.shape
         return curves, {
