@@ -537,3 +537,19 @@ def test_a_clients_widget_values_are_checked_on_the_server():
         assert number.value == 12
     finally:
         server.stop()
+
+
+def test_hidden_names_and_link_loops_are_not_the_clients(tmp_path):
+    from nurbskit.studio.workdir import Workdir
+
+    (tmp_path / ".env").write_text("SECRET=1\n")
+    (tmp_path / "loop.xyz").symlink_to(tmp_path / "loop.xyz")
+    (tmp_path / "ok.xyz").write_text("0 0 0\n")
+    wd = Workdir(tmp_path)
+    assert wd.files() == ["ok.xyz"]  # the loop is not offered, and listing does not fail
+    for name, says in ((".env", "hidden names"), ("a/.git/config.json", "hidden names"),
+                       (".studio/uploads/x.xyz", "hidden names"), ("loop.xyz", "cannot be followed")):
+        with pytest.raises(OptionError, match=says):
+            wd.resolve(name, must_exist=False)
+    with pytest.raises(OptionError, match="--workdir: expected a folder, got an empty name"):
+        Workdir("")

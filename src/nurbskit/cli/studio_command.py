@@ -166,9 +166,13 @@ def run(args) -> int:
 
     port = _port(args.port)
     limit = _megabytes(args.max_upload_mb)
+    if not args.workdir.strip():
+        raise OptionError("--workdir: expected a folder, got an empty name")
     workdir = Path(args.workdir)
     if not workdir.is_dir():
         raise OptionError(f"--workdir: {workdir} is not a directory")
+    if not os.access(workdir, os.W_OK | os.X_OK):
+        sys.stderr.write(f"nurbskit studio: note: {workdir} is read-only here: uploads and saving will fail\n")
     host = check_host(args.host)  # before viser, whose bind loop never ends for a bad host
     port = check_port(host, port)  # or for a privileged port, or past 65535
     require("viser", "studio", "nurbskit studio")

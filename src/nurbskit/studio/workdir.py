@@ -40,6 +40,8 @@ class Workdir:
     """
 
     def __init__(self, root: str | os.PathLike):
+        if not str(root).strip():
+            raise OptionError("--workdir: expected a folder, got an empty name")
         root = Path(root)
         if not root.is_dir():
             raise OptionError(f"--workdir: {root} is not a directory")
@@ -50,8 +52,9 @@ class Workdir:
         """The absolute path of ``name`` (relative to the folder), or an OptionError.
 
         Refused: empty names, absolute paths (``/x``, ``C:\\x``, ``~``), any ``..`` part,
-        backslashes, NUL bytes, and paths whose real location (after following
-        symbolic links) is outside the folder.
+        hidden parts (``.x``: the studio's own ``.studio`` scratch, a user's dot-files),
+        backslashes, NUL bytes, links that cannot be followed, and paths whose real
+        location (after following symbolic links) is outside the folder.
         """
         text = str(name).strip()
         if not text:
@@ -63,8 +66,13 @@ class Workdir:
             raise OptionError(f"{text!r}: give a path relative to the studio's folder, not an absolute one")
         if any(part == ".." for part in pure.parts):
             raise OptionError(f"{text!r}: '..' is not allowed; the studio only reads and writes inside its folder")
+        if any(part.startswith(".") for part in pure.parts):
+            raise OptionError(f"{text!r}: hidden names (starting with '.') are not the studio's to read or write")
         path = self.root.joinpath(*pure.parts)
-        real = path.resolve()
+        try:
+            real = path.resolve()
+        except (OSError, RuntimeError):  # a loop of symbolic links, a folder that cannot be entered
+            raise OptionError(f"{text!r}: cannot be followed to a file (a loop of symbolic links?)") from None
         if real != self.root and self.root not in real.parents:
             raise OptionError(f"{text!r}: resolves outside the studio's folder (a symbolic link?)")
         if must_exist and not real.is_file():
@@ -82,8 +90,8 @@ class Workdir:
                 rel = Path(dirpath, f).relative_to(self.root).as_posix()
                 try:
                     self.resolve(rel)
-                except OptionError:
-                    continue  # a link out of the folder is not offered
+                except (OptionError, OSError):
+                    continue  # a link out of the folder, or one that cannot be followed, is not offered
                 out.append(rel)
                 if len(out) >= limit:
                     return out
