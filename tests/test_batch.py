@@ -878,3 +878,19 @@ def test_a_timeout_python_could_not_raise_is_delivered_again_silently():
     finally:
         gc.callbacks.remove(callback)
     assert seen == [True, True] and not _in_gc_callback(threading.get_ident())
+
+
+def test_folder_search_skips_folders_nurbskit_wrote(tmp_path):
+    # an earlier run's output inside an input folder holds overlays and figures: no drawings
+    from nurbskit._fs import MANIFEST
+    from nurbskit.batch.inputs import expand_inputs
+
+    (tmp_path / "drawings").mkdir()
+    for name in ("a.png", "b.png"):
+        (tmp_path / "drawings" / name).write_bytes(b"png")
+    old = tmp_path / "drawings" / "old_run" / "a.png"
+    old.parent.mkdir()
+    (old.parent / "overlay.png").write_bytes(b"png")
+    (old.parent / MANIFEST).write_text("{}")
+    found = expand_inputs([tmp_path / "drawings"], get_command("curves"))
+    assert sorted(p.name for p in found) == ["a.png", "b.png"]

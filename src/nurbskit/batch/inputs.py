@@ -9,6 +9,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Iterable
 
+from .._fs import MANIFEST
 from ..errors import InputError, OptionError
 from .commands import BatchCommand, Item
 from .summary import SUMMARY_FILES
@@ -23,8 +24,9 @@ def expand_inputs(inputs: Iterable[str | os.PathLike], command: BatchCommand,
     A pattern with ``*``, ``?`` or ``[`` is expanded as a glob (``**`` recurses); a
     pattern or folder that matches nothing is an error, as is a missing file, and a folder
     that is ``exclude`` itself (``--out`` equal to an input folder). Each file
-    appears once, at its first mention. Folder searches skip hidden entries and the
-    folder ``exclude`` (the batch's own output: its ``points.off`` are no inputs).
+    appears once, at its first mention. Folder searches skip hidden entries, the folder
+    ``exclude`` (the batch's own output: its ``points.off`` are no inputs) and any folder
+    nurbskit wrote (it holds a manifest: an earlier run's ``overlay.png`` is no drawing).
     """
     skip = Path(exclude).resolve() if exclude is not None else None
     found: list[Path] = []
@@ -76,8 +78,8 @@ def _search(folder: Path, command: BatchCommand, skip: Path | None = None) -> li
     skip_names = set(command.skip_names)
     files = []
     for root, dirs, names in os.walk(folder):
-        if skip is not None and Path(root).resolve() == skip:
-            dirs[:] = []
+        if skip is not None and Path(root).resolve() == skip or (Path(root) / MANIFEST).is_file():
+            dirs[:] = []  # the batch's own output, or any folder nurbskit wrote: its results are no inputs
             continue
         dirs[:] = sorted(d for d in dirs if not d.startswith("."))  # hidden: temporary outputs, VCS
         files += [Path(root) / n for n in sorted(names)
