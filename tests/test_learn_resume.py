@@ -278,3 +278,15 @@ def test_steps_are_bounded(tmp_path, capsys):
     with pytest.raises(OptionError, match="at most"):
         TrainConfig(steps=10**9 + 1)
 
+
+
+def test_init_names_what_it_was_given(good_run, tmp_path, capsys):
+    not_weights = tmp_path / "d.png"
+    not_weights.write_bytes(b"\x89PNG\r\n\x1a\n")
+    for init, says in ((str(not_weights), "not a nurbskit weights file (torch cannot read it as saved weights)"),
+                       (str(good_run / "checkpoint.pt"), "a training checkpoint: continue it with --resume"),
+                       ("nosuch", "--init no shipped weights called 'nosuch'"),
+                       ("curves_m", "its weights are those of curves_m, not of curves_v")):
+        assert curves(tmp_path / "o", "--init", init, steps=1) == 2
+        err = capsys.readouterr().err
+        assert one_line(err) and says in err and "weights_only" not in err, err

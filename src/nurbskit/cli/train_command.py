@@ -104,7 +104,7 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
         torch.manual_seed(config.seed)
         model = build_model()
     if getattr(args, "init", None):  # on --resume the checkpoint's weights replace these; the record stays
-        meta["init"] = _load_initial_weights(model, args.init)
+        meta["init"] = _load_initial_weights(model, args.init, meta)
     if args.resume:  # a checkpoint of another network or other settings: refused before the bar
         load_checkpoint(args.out, model, config, meta)
     bar = None
@@ -169,17 +169,25 @@ def _left_behind(out: Path, existed: bool, before, steps: int) -> str:
     return "no output was left behind"
 
 
-def _load_initial_weights(model, name_or_path: str) -> dict:
+def _load_initial_weights(model, name_or_path: str, run: dict | None = None) -> dict:
     """Load ``--init`` weights into ``model``; returns what the new weights record of them
-    (the command, steps and seconds that made them: a fine-tuned model's full recipe)."""
-    from ..errors import OptionError
+    (the command, steps and seconds that made them: a fine-tuned model's full recipe).
+    ``run``: this run's record (its ``name`` and ``arch`` name the network it trains)."""
+    from ..errors import InputError, OptionError
     from ..learn import load_weights
 
-    state, meta = load_weights(name_or_path)
+    try:
+        state, meta = load_weights(name_or_path)
+    except InputError as exc:
+        raise OptionError(f"--init {exc}") from None
     try:
         model.load_state_dict(state)
     except RuntimeError:
-        raise OptionError(f"--init {name_or_path}: its weights are not those of this network "
-                          f"({meta.get('name', 'unnamed')}, {meta.get('arch')})") from None
+        def named(record: dict, default: str) -> str:
+            arch = record.get("arch")
+            return record.get("name", default) + (f" ({arch})" if arch else "")
+
+        raise OptionError(f"--init {name_or_path}: its weights are those of {named(meta, 'an unnamed network')}, "
+                          f"not of {named(run or {}, 'this network')}") from None
     return {"weights": str(name_or_path), **{k: meta[k] for k in ("name", "command", "steps", "seconds", "init")
                                              if k in meta}}

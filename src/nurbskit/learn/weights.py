@@ -59,6 +59,10 @@ def load_weights(name_or_path: str | os.PathLike, map_location="cpu") -> tuple[d
         raise InputError(f"{path}: no such weights file")
     try:
         data = torch.load(path, map_location=map_location, weights_only=True)
-        return data["state_dict"], data["meta"]
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure is a bad file
-        raise InputError(f"{path}: not a nurbskit weights file ({type(exc).__name__}: {exc})") from None
+    except Exception:  # noqa: BLE001 - any unpickling failure is a bad file (torch's advice is not for users)
+        raise InputError(f"{path}: not a nurbskit weights file (torch cannot read it as saved weights)") from None
+    if not isinstance(data, dict) or "state_dict" not in data or "meta" not in data:
+        hint = ("a training checkpoint: continue it with --resume, or pass the run's weights.pt"
+                if isinstance(data, dict) and "model" in data else "expected the weights.pt a training run writes")
+        raise InputError(f"{path}: not a nurbskit weights file ({hint})")
+    return data["state_dict"], data["meta"]
