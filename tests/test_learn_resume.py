@@ -290,3 +290,17 @@ def test_init_names_what_it_was_given(good_run, tmp_path, capsys):
         assert curves(tmp_path / "o", "--init", init, steps=1) == 2
         err = capsys.readouterr().err
         assert one_line(err) and says in err and "weights_only" not in err, err
+
+
+def test_a_batch_that_cannot_fit_is_refused_before_the_first_step(tmp_path, capsys, monkeypatch):
+    import nurbskit._budget as budget
+    from nurbskit.curves.nets.train import LOSSES, batch_maker, build
+    from nurbskit.learn.trainer import step_memory
+
+    fixed, per = step_memory(lambda: build("V", {}), batch_maker("V", 64), LOSSES["V"])
+    assert per > 0 and fixed >= 0
+    monkeypatch.setattr(budget, "available_bytes", lambda: int(fixed / 2 + per / 2 * 100.5))  # 100 examples fit
+    assert curves(tmp_path / "o", "--batch-size", "4096", steps=1) == 2
+    err = capsys.readouterr().err
+    assert one_line(err) and "--batch-size 4096" in err and "--batch-size 100 fits" in err, err
+    assert not (tmp_path / "o").exists()

@@ -107,6 +107,7 @@ def run_training(args, build_model, make_batch, loss_fn, config, meta: dict, val
         meta["init"] = _load_initial_weights(model, args.init, meta)
     if args.resume:  # a checkpoint of another network or other settings: refused before the bar
         load_checkpoint(args.out, model, config, meta)
+    _check_step_memory(build_model, make_batch, loss_fn, config.batch_size)
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -167,6 +168,20 @@ def _left_behind(out: Path, existed: bool, before, steps: int) -> str:
     if existed:
         return f"{out}/ holds what it held before; nothing was written"
     return "no output was left behind"
+
+
+def _check_step_memory(build_model, make_batch, loss_fn, batch_size: int) -> None:
+    """Refuse, before the first step, a ``--batch-size`` whose steps cannot fit in memory
+    (:func:`nurbskit.learn.trainer.step_memory`, half of its sum planned)."""
+    from .._budget import available_bytes, require_memory
+    from ..learn.trainer import step_memory
+
+    fixed, per = step_memory(build_model, make_batch, loss_fn)
+    fixed, per = fixed / 2, per / 2
+    budget = available_bytes()
+    fits = int((budget - fixed) // per) if per > 0 else batch_size
+    require_memory(fixed + per * batch_size, f"--batch-size {batch_size} ({per / 2**20:.1f} MB an example)",
+                   f"--batch-size {max(fits, 0)} fits" if fits >= 1 else "no batch fits", budget=budget)
 
 
 def _load_initial_weights(model, name_or_path: str, run: dict | None = None) -> dict:
