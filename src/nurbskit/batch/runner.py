@@ -401,6 +401,13 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
         raise
     finally:
         if begun:
+            if interrupted:  # items the workers finished while the cluster closed count as finished
+                for item in items:
+                    if item.name not in records:
+                        with contextlib.suppress(OptionError, OSError, ValueError):
+                            record = completed(command, item, out, options)
+                            if record is not None:
+                                records[item.name] = dict(record, resumed=False)
             _summarise(out, items, records, meta, start, interrupted, figure)
     ordered = [records[item.name] for item in items]
     if dataframe:
