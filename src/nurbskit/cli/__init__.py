@@ -161,7 +161,9 @@ def _main(argv: list[str] | None) -> int:
         _say(f"{command}: error: {where}{exc.strerror or _one_line(exc)}")
         return EXIT_USER_ERROR
     except MemoryError:
-        _say(f"{command}: error: out of memory; the input is too large for this machine")
+        where = _input_of(args) if args is not None else None
+        _say(f"{command}: error: {where + ': ' if where else ''}out of memory; the input or the options ask for more "
+             "than this machine has")
         return EXIT_USER_ERROR
     except Terminated:
         _say(f"{command}: terminated; no partial output was left behind")
