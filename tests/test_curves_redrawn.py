@@ -75,7 +75,7 @@ def test_init_starts_from_shipped_weights_and_refuses_another_network(tmp_path, 
     assert code == 2
     err = capsys.readouterr().err
     assert one_line(err)
-    assert "--init curves_v" in err and "not those of this network" in err
+    assert "--init curves_v: its weights are those of curves_v, not of curves_m" in err
 
 
 def _bench_rows() -> list[dict]:
