@@ -22,6 +22,17 @@ def one_line(err: str) -> bool:
     return "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
+def refused(capsys, argv, *needles) -> str:
+    """Run ``argv``; assert exit 2 and one line on stderr (no "unexpected" error) holding
+    every needle; return the line."""
+    rc = run([str(a) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and one_line(err) and "unexpected" not in err, err
+    for needle in needles:
+        assert needle in err, err
+    return err.strip()
+
+
 def run_shape_cli(root: Path, clouds: dict) -> dict:
     """``nurbskit shape --kind KIND --iters 0`` (no refinement, no figures) on each cloud of
     ``{kind: cloud}`` (``cloud.points (N, 3)``), saved as ``root/KIND.npy``: ``{kind:

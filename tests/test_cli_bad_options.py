@@ -11,19 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from _cli import one_line, run
+from _cli import one_line, refused, run
 from nurbskit.errors import OptionError
-
-
-def refused(capsys, argv, *needles):
-    """Run ``argv``; assert exit 2, one line on stderr, containing every needle; return the line."""
-    rc = run([str(a) for a in argv])
-    err = capsys.readouterr().err
-    assert rc == 2 and one_line(err), err
-    assert "unexpected" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err.strip()
 
 
 @pytest.fixture

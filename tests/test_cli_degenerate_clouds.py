@@ -10,21 +10,12 @@ import json
 import numpy as np
 import pytest
 
-from _cli import one_line, run
+from _cli import refused, run
 
 
 def _sheet(n: int = 400, seed: int = 0) -> np.ndarray:
     uv = np.random.default_rng(seed).random((n, 2))
     return np.c_[uv, 0.2 * np.sin(3 * uv[:, 0]) * np.cos(2 * uv[:, 1])]
-
-
-def refused(capsys, argv, *needles) -> str:
-    rc = run([str(a) for a in argv])
-    err = capsys.readouterr().err
-    assert rc == 2 and one_line(err) and "unexpected" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 @pytest.mark.parametrize("factor, word", [(1e200, "overflow"), (1e-300, "underflow")])

@@ -15,17 +15,8 @@ import pytest
 import torch
 
 import nurbskit
-from _cli import one_line, run
+from _cli import one_line, refused, run
 from nurbskit import NURBSSurface
-
-
-def refused(capsys, argv, *needles) -> str:
-    rc = run([str(a) for a in argv])
-    err = capsys.readouterr().err
-    assert rc == 2 and one_line(err) and "unexpected" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 @pytest.fixture
