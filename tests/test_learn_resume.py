@@ -304,3 +304,11 @@ def test_a_batch_that_cannot_fit_is_refused_before_the_first_step(tmp_path, caps
     err = capsys.readouterr().err
     assert one_line(err) and "--batch-size 4096" in err and "--batch-size 100 fits" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_resume_refuses_another_learning_rate(good_run, tmp_path, capsys):
+    run_folder = copy_of(good_run, tmp_path)
+    assert curves(run_folder, "--resume", "--lr", "0.5", steps=6) == 2
+    err = capsys.readouterr().err
+    assert one_line(err) and "--lr 0.5: the run in" in err and "was started with --lr" in err, err
+    assert step_of(run_folder) == 4

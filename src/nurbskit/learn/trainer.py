@@ -131,7 +131,7 @@ _RUN_FACTS = frozenset({"command", "torch", "init", "steps", "seconds", "config"
 # Facts of ``meta`` that no option sets: a difference there means another kind of network.
 _NOT_OPTIONS = frozenset({"name", "units"})
 # Settings of TrainConfig that change the data a step sees: a resumed run must keep them.
-_SAME_CONFIG = ("seed", "batch_size")
+_SAME_CONFIG = ("seed", "batch_size", "lr")  # a run is one recipe: --steps may only grow
 
 
 def _held(value: Any) -> str:
@@ -259,7 +259,7 @@ def _check_same_run(ckpt: Path, saved: dict, model: nn.Module, config: TrainConf
 
 def load_checkpoint(out: str | os.PathLike, model: nn.Module, config: TrainConfig, meta: dict | None = None) -> dict:
     """``out/checkpoint.pt`` read and checked against this run (:func:`read_checkpoint`): the
-    network (its kind, options and parameter shapes), ``seed`` and ``batch_size`` must be the
+    network (its kind, options and parameter shapes), ``seed``, ``batch_size`` and ``lr`` must be the
     run's, ``steps`` at least its step. Raises OptionError naming the option that differs, or
     InputError naming the file; loads nothing into ``model``."""
     ckpt = Path(out) / "checkpoint.pt"
