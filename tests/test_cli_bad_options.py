@@ -229,3 +229,17 @@ def test_revolve_image_one_object_with_a_hole_has_no_note(tmp_path, capsys):
     assert run(["revolve-image", str(src), "--out", str(tmp_path / "o"), "--no-figures"]) == 0
     assert "note" not in capsys.readouterr().err
     assert json.loads((tmp_path / "o" / "report.json").read_text())["ignored_objects_px"] == []
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["fit", "in.xyz", "--out", "o", "--ctrl", "-3x5"], "argument --ctrl: expected one argument (a value that starts "
+                                                         "with '-' is written --ctrl=-3x5)"),
+    (["sample", "in.xyz", "-n", "10", "-o", "-x.ply"], "(a value that starts with '-' is written --output=-x.ply)"),
+])
+def test_a_value_that_starts_with_a_dash_is_explained(capsys, argv, says):
+    refused(capsys, argv, says)
+
+
+def test_a_missing_value_is_not_explained_as_a_dash(capsys):
+    err = refused(capsys, ["fit", "in.xyz", "--out"], "argument --out: expected one argument")
+    assert "starts with '-'" not in err

@@ -43,10 +43,21 @@ EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
 
 
+_ARGV: list[str] = []  # the arguments being parsed, for the messages of _Parser.error
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (no usage dump): `nurbskit fit: error: ...`."""
 
     def error(self, message: str):  # noqa: D401 - argparse API
+        if message.endswith(("expected one argument", "expected at least one argument")):
+            # argparse takes the value of "--ctrl -3x5" for an option: say how to give it
+            names = message.split(":", 1)[0].removeprefix("argument ").split("/")
+            for given, value in zip(_ARGV, _ARGV[1:]):
+                if given in names and value.startswith("-") and len(value) > 1:
+                    long = next((n for n in names if n.startswith("--")), None)
+                    message += f" (a value that starts with '-' is written {f'{long}={value}' if long else given + value})"
+                    break
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise SystemExit(EXIT_USER_ERROR)
 
@@ -136,6 +147,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         parser = build_parser(_command_of(argv))
         _add_debug(parser)
+        _ARGV[:] = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(argv)
         debug = debug or bool(getattr(args, "debug", False))
         if getattr(args, "run", None) is None:
