@@ -894,3 +894,24 @@ def test_folder_search_skips_folders_nurbskit_wrote(tmp_path):
     (old.parent / MANIFEST).write_text("{}")
     found = expand_inputs([tmp_path / "drawings"], get_command("curves"))
     assert sorted(p.name for p in found) == ["a.png", "b.png"]
+
+
+def test_resume_keeps_the_names_an_earlier_run_gave(tmp_path):
+    # adding b/x.png beside a/x.png renames a's item ("x" -> "a_x.png"); on --resume the
+    # finished folder's name is kept, so its result is reused, not recomputed beside it
+    from nurbskit.batch.commands import Item
+    from nurbskit.batch.task import fingerprint
+
+    a, b = tmp_path / "a" / "x.png", tmp_path / "b" / "x.png"
+    for p in (a, b):
+        p.parent.mkdir()
+        p.write_bytes(b"png")
+    out = tmp_path / "out"
+    (out / "x").mkdir(parents=True)
+    first = Item(name="x", inputs=(("input", str(a)),), source=str(a))
+    (out / "x" / MARKER).write_text(json.dumps({"version": 1, "command": "curves", "options": [],
+                                                 "inputs": fingerprint(first), "record": {"status": "ok"}}))
+    items = assign_names([Item(name="x", inputs=(("input", str(p)),), source=str(p)) for p in (a, b)])
+    assert [i.name for i in items] == ["a_x.png", "b_x.png"]
+    assert [i.name for i in runner.kept_names(items, out)] == ["x", "b_x.png"]
+    assert [i.name for i in runner.kept_names(items, tmp_path / "empty")] == ["a_x.png", "b_x.png"]

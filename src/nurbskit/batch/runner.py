@@ -28,6 +28,7 @@ import os
 import pickle
 import time
 import uuid
+from collections import Counter
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
@@ -272,6 +273,30 @@ def _failure_message(exc: BaseException, client, memory_limit, retries_hint: str
     return describe_error(exc)
 
 
+def kept_names(items: list[Item], out: Path) -> list[Item]:
+    """``items`` with the folder names an earlier run in ``out`` gave the same inputs.
+
+    Names are unique among a run's items, so adding inputs can rename an item (``x.png``
+    becomes ``a_x.png`` beside ``b/x.png``); on ``--resume`` an item whose inputs (paths)
+    a finished folder's marker lists keeps that folder's name, when no other item has it.
+    """
+    earlier: dict[tuple, str] = {}
+    with contextlib.suppress(OSError):
+        for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+            marker = read_marker(folder)
+            if marker is not None and isinstance(marker.get("inputs"), list):
+                with contextlib.suppress(TypeError, KeyError, AttributeError):
+                    earlier.setdefault(tuple((i["role"], i["path"]) for i in marker["inputs"]), folder.name)
+    if not earlier:
+        return items
+    wanted = [earlier.get(tuple((role, os.path.abspath(path)) for role, path in item.inputs)) for item in items]
+    taken = Counter(w for w in wanted if w is not None)
+    names = [w if w is not None and taken[w] == 1 else item.name for w, item in zip(wanted, items)]
+    if len(set(names)) != len(names):  # a kept name would clash with a new one: keep the run's own names
+        return items
+    return [Item(name=n, inputs=item.inputs, source=item.source) for n, item in zip(names, items)]
+
+
 def completed(command: BatchCommand, item: Item, out: Path, options: Sequence[str]) -> dict | None:
     """The record of a finished item (``--resume``), or None when it has to run.
 
@@ -368,6 +393,7 @@ def run(command: str | BatchCommand, inputs: Iterable[str | os.PathLike] | str |
 
     records: dict[str, dict] = {}
     if resume:
+        items = kept_names(items, out)
         for item in items:
             record = completed(command, item, out, options)
             if record is not None:
