@@ -553,3 +553,22 @@ def test_hidden_names_and_link_loops_are_not_the_clients(tmp_path):
             wd.resolve(name, must_exist=False)
     with pytest.raises(OptionError, match="--workdir: expected a folder, got an empty name"):
         Workdir("")
+
+
+def test_a_clients_file_may_take_ten_times_the_upload_limit_once_read(tmp_path):
+    # a compressed .npz of a few hundred KB declares 480 MB of points: refused by what the
+    # studio gives one file, not by what the machine has, and named as the page knows it
+    import types
+
+    from nurbskit.io import read_points
+    from nurbskit.studio.app import READ_MEMORY_FACTOR, read_upload
+    from nurbskit.studio.workdir import Workdir
+
+    np.savez_compressed(tmp_path / "bomb.npz", points=np.zeros((20_000_000, 3)))
+    session = types.SimpleNamespace(options=types.SimpleNamespace(max_upload_bytes=10 * 2**20),
+                                    workdir=Workdir(tmp_path))
+    upload = types.SimpleNamespace(name="bomb.npz", content=(tmp_path / "bomb.npz").read_bytes())
+    with pytest.raises(InputError, match=rf"^bomb\.npz: reading the arrays needs about 457\.8 MB of memory but only "
+                                         rf"{READ_MEMORY_FACTOR * 10:.1f} MB is available"):
+        read_upload(session, upload, lambda path, name: read_points(path))
+    assert list((tmp_path / ".studio" / "uploads").iterdir()) == []

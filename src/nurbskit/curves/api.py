@@ -30,7 +30,7 @@ def check_fits(source, height: int, width: int) -> None:
     """Refuse (InputError naming ``source``) an image whose reading would not fit in memory."""
     from ..io._base import check_fits as fits
 
-    fits(source, BYTES_PER_PIXEL * height * width, f"reading curves from a {width} x {height} image")
+    fits(source, BYTES_PER_PIXEL * height * width, f"curves from a {width} x {height} image")
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

@@ -8,6 +8,8 @@ starts with the file name and says what was expected and what arrived.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import io
 import os
 import re
@@ -167,8 +169,29 @@ def read_bytes(path: Path) -> bytes:
         raise InputError(f"{path}: the file ({_human(path.stat().st_size)}) does not fit in memory") from None
 
 
+#: A ceiling on :func:`available_memory` for the current thread's work (:func:`memory_cap`).
+_CAP: contextvars.ContextVar[int | None] = contextvars.ContextVar("nurbskit_memory_cap", default=None)
+
+
+@contextlib.contextmanager
+def memory_cap(nbytes: int):
+    """Plan at most ``nbytes`` in this block, whatever the machine has: a server reading a
+    client's file (a few MB of ``.npz`` can declare gigabytes) gives one client no more."""
+    token = _CAP.set(int(nbytes))
+    try:
+        yield
+    finally:
+        _CAP.reset(token)
+
+
 def available_memory() -> int:
-    """Bytes of memory the OS says can still be allocated (MemAvailable; a large number if unknown)."""
+    """Bytes of memory the OS says can still be allocated (MemAvailable; a large number if
+    unknown), at most the cap of :func:`memory_cap` when one is set."""
+    cap = _CAP.get()
+    return _available_memory() if cap is None else min(cap, _available_memory())
+
+
+def _available_memory() -> int:
     try:
         with open("/proc/meminfo", "rb") as handle:
             for line in handle:
@@ -195,7 +218,7 @@ def check_fits(path: Path, nbytes: int, what: str) -> None:
     avail = available_memory()
     if nbytes > avail:
         raise InputError(
-            f"{path}: {what} needs about {_human(nbytes)} of memory but only {_human(avail)} is available"
+            f"{path}: reading {what} needs about {_human(nbytes)} of memory but only {_human(avail)} is available"
         )
 
 

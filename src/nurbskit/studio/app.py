@@ -13,6 +13,7 @@ The widgets every tab shares (:class:`Loader`, :class:`RunPanel`, :class:`Export
 
 from __future__ import annotations
 
+import contextlib
 import html
 import io
 import threading
@@ -81,6 +82,10 @@ def describe_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
+#: A file read for a client may take this many times the upload limit in memory.
+READ_MEMORY_FACTOR = 10
+
+
 def read_upload(session: "Session", file, read: Callable[[Path, str], object]) -> tuple[object, str]:
     """``(read(scratch_path, name), name)`` of an uploaded ``file`` (viser's UploadedFile).
 
@@ -92,9 +97,32 @@ def read_upload(session: "Session", file, read: Callable[[Path, str], object]) -
     tmp = session.workdir.scratch(file.name)
     try:
         tmp.write_bytes(file.content)
-        return read(tmp, name), name
+        with read_memory(session), named_as(tmp, name):
+            return read(tmp, name), name
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def named_as(path: Path, name: str):
+    """A reader's error about ``path`` (a scratch file, an absolute path on the server)
+    told with the ``name`` the page knows it by."""
+    try:
+        yield
+    except NurbskitError as exc:
+        text = str(exc)
+        if str(path) not in text:
+            raise
+        raise type(exc)(text.replace(str(path), name)) from None
+
+
+def read_memory(session: "Session"):
+    """The memory a client's file may take once read: ``READ_MEMORY_FACTOR`` times the upload
+    limit (a compressed ``.npz`` of a few MB can declare gigabytes; the readers check what
+    a file declares against this before allocating)."""
+    from ..io._base import memory_cap
+
+    return memory_cap(READ_MEMORY_FACTOR * session.options.max_upload_bytes)
 
 
 class Loader:
@@ -142,7 +170,8 @@ class Loader:
     def _from_workdir(self) -> None:
         name = self.path.value or self.choice.value
         path = self.session.workdir.resolve(name)
-        data = self.read(path, name)
+        with read_memory(self.session), named_as(path, name):
+            data = self.read(path, name)
         self.on_loaded(data, name)
 
 
