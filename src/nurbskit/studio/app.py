@@ -82,8 +82,11 @@ def describe_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
-#: A file read for a client may take this many times the upload limit in memory.
+#: A file read for a client may take this many times the upload limit in memory, and at
+#: least ``READ_MEMORY_FLOOR`` bytes (an image's reading takes about 128 bytes a pixel: a
+#: few hundred KB of PNG can need tens of MB, rightly).
 READ_MEMORY_FACTOR = 10
+READ_MEMORY_FLOOR = 1 << 30
 
 
 def read_upload(session: "Session", file, read: Callable[[Path, str], object]) -> tuple[object, str]:
@@ -118,11 +121,11 @@ def named_as(path: Path, name: str):
 
 def read_memory(session: "Session"):
     """The memory a client's file may take once read: ``READ_MEMORY_FACTOR`` times the upload
-    limit (a compressed ``.npz`` of a few MB can declare gigabytes; the readers check what
-    a file declares against this before allocating)."""
+    limit, at least ``READ_MEMORY_FLOOR`` (a compressed ``.npz`` of a few MB can declare
+    gigabytes; the readers check what a file declares against this before allocating)."""
     from ..io._base import memory_cap
 
-    return memory_cap(READ_MEMORY_FACTOR * session.options.max_upload_bytes)
+    return memory_cap(max(READ_MEMORY_FACTOR * session.options.max_upload_bytes, READ_MEMORY_FLOOR))
 
 
 class Loader:
