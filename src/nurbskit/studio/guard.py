@@ -21,9 +21,6 @@ import http
 import ipaddress
 from urllib.parse import urlsplit
 
-LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
-
-
 def is_loopback(host: str) -> bool:
     """True for addresses only this machine reaches (127.0.0.0/8, ::1, localhost)."""
     name = host.strip().strip("[]").lower()
