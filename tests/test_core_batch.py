@@ -195,6 +195,13 @@ def test_a_validated_object_checks_the_domain_with_one_host_read():
     with OperationCounter() as count:
         s.evaluate(uv, extrapolate=True)
     assert count.host_reads == 0
+    # a grid: one host read for all its axes, and the axis out of the domain is named
+    u = torch.linspace(0, 1, 7)
+    with OperationCounter() as count:
+        s.evaluate_grid(u, u)
+    assert count.host_reads == 1
+    with pytest.raises(NurbskitError, match="parameter v = 1.5"):
+        s.evaluate_grid(u, torch.linspace(0, 1.5, 4))
 
 
 def test_trainable_knots_build_the_basis_vectorised_over_the_degree():

@@ -15,8 +15,8 @@ finiteness, positive weights, knot vectors (knots closer than
 checks, in :meth:`TensorSpline.evaluate`, :meth:`~TensorSpline.derivatives` and
 :meth:`~TensorSpline.evaluate_grid`, that parameters lie in the knot domain, and raises
 an error naming the parameter, its value and the domain unless ``extrapolate=True``.
-That check reads one boolean back to the host per call, which on a GPU waits for the
-device; objects built with ``validate=False`` (as a fitting loop builds them; what an
+That check reads one boolean back to the host per call (one for all the axes of
+:meth:`~TensorSpline.evaluate_grid`), which on a GPU waits for the device; objects built with ``validate=False`` (as a fitting loop builds them; what an
 object derives, a batch element or a knot operation's result, keeps its setting) skip
 it, and then evaluation,
 derivatives and sampling read nothing back to the host at all. :meth:`~TensorSpline.sample`
@@ -292,29 +292,55 @@ class TensorSpline:
             ) from None
         return t
 
-    def _check_domain(self, t: Tensor, extrapolate: bool, grid_axis: int | None = None, given=None) -> None:
-        """Raise when a parameter lies outside the knot domain (one host read; see the module docstring).
-
-        ``t (..., M, k)`` or, for one grid axis, ``(..., R)``. A slack of 8 units in the
-        last place of the domain ends (in the coarser of the spline's dtype and that of the
-        ``given`` parameters) absorbs parameters computed or rounded in floating point.
-        """
+    def _check_domain(self, t: Tensor, extrapolate: bool, given=None) -> None:
+        """Raise when a parameter ``t (..., M, k)`` lies outside the knot domain (one host
+        read; see the module docstring)."""
         if extrapolate or not self.validate:
             return
-        axes = range(self.para_dim) if grid_axis is None else [grid_axis]
-        lo = torch.stack([self.knot_vectors[a].detach()[..., self.degrees[a]] for a in axes], -1)
-        hi = torch.stack([self.knot_vectors[a].detach()[..., self.sizes[a]] for a in axes], -1)
-        eps = torch.finfo(lo.dtype).eps
-        if isinstance(given, Tensor) and given.is_floating_point():
-            eps = max(eps, torch.finfo(given.dtype).eps)
+        inside = self._inside(t, *self._bounds([given]))
+        if not bool(inside.all()):
+            self._raise_outside(t, inside)
+
+    def _check_grid_domain(self, axes: Sequence[Tensor], extrapolate: bool, given: Sequence) -> None:
+        """:meth:`_check_domain` of the axes ``(R,)`` or ``(*B, R)`` of a grid, with one host read for all."""
+        if extrapolate or not self.validate:
+            return
+        lo, hi = self._bounds(given)
+        inside = [self._inside(ax, lo, hi, a) for a, ax in enumerate(axes)]
+        if bool(torch.stack([m.all() for m in inside]).all()):
+            return
+        for a, (ax, m) in enumerate(zip(axes, inside)):
+            if not bool(m.all()):
+                self._raise_outside(ax, m, a)
+
+    def _bounds(self, given: Sequence) -> tuple[Tensor, Tensor]:
+        """The domain's ends ``(k,)`` (or ``(*B, k)`` for per-element knots), widened by a
+        slack of 8 units in the last place (in the coarser of the spline's dtype and that
+        of the ``given`` parameters), which absorbs parameters computed or rounded in
+        floating point."""
+        kvs = [kv.detach() for kv in self.knot_vectors]
+        lo = torch.stack(torch.broadcast_tensors(*[kv[..., p] for kv, p in zip(kvs, self.degrees)]), -1)
+        hi = torch.stack(torch.broadcast_tensors(*[kv[..., n] for kv, n in zip(kvs, self.sizes)]), -1)
+        eps = max([torch.finfo(lo.dtype).eps] + [torch.finfo(g.dtype).eps for g in given
+                                                   if isinstance(g, Tensor) and g.is_floating_point()])
         slack = 8 * eps * torch.maximum(lo.abs(), hi.abs())
-        lo, hi = lo - slack, hi + slack
+        return lo - slack, hi + slack
+
+    def _inside(self, t: Tensor, lo: Tensor, hi: Tensor, grid_axis: int | None = None) -> Tensor:
+        """Which parameters of ``t`` lie within the :meth:`_bounds` ``lo``, ``hi``, as a
+        boolean tensor (nothing is read back to the host): ``t (..., M, k)``, or ``(..., R)``
+        for one grid axis."""
+        if grid_axis is not None:
+            lo, hi = lo[..., grid_axis : grid_axis + 1], hi[..., grid_axis : grid_axis + 1]
         if lo.ndim > 1:  # per-element domains (*B, k): align with (*B, M, k)
             lo, hi = lo.unsqueeze(-2), hi.unsqueeze(-2)
         x = t.detach() if grid_axis is None else t.detach().unsqueeze(-1)
-        inside = (x >= lo) & (x <= hi)
-        if bool(inside.all()):
-            return
+        return (x >= lo) & (x <= hi)
+
+    def _raise_outside(self, t: Tensor, inside: Tensor, grid_axis: int | None = None) -> None:
+        """The error for the first parameter of ``t`` outside the domain (``inside`` from :meth:`_inside`)."""
+        axes = range(self.para_dim) if grid_axis is None else [grid_axis]
+        x = t.detach() if grid_axis is None else t.detach().unsqueeze(-1)
         where = tuple(int(i) for i in (~inside).nonzero()[0])
         a = list(axes)[where[-1]]
         value = float(x.expand(inside.shape)[where])
@@ -395,8 +421,7 @@ class TensorSpline:
                 per = f" or, one row per batch element, {self.batch_shape + ('R',)}" if self.batch_shape else ""
                 raise NurbskitError(f"{self.kind} evaluate_grid: the {_AXES[a]} axis must have shape (R,){per}, "
                                     f"got {tuple(ax.shape)}")
-        for a, ax in enumerate(axes):
-            self._check_domain(ax, extrapolate, grid_axis=a, given=given[a])
+        self._check_grid_domain(axes, extrapolate, given)
         return _tp.evaluate_grid(self.control_points, self.weights, self.knot_vectors, self.degrees, axes, order)
 
     def sample(self, resolution: int | Sequence[int], order: int = 0) -> Tensor:

@@ -1,8 +1,8 @@
 """The trainable parametrisation of a NURBS surface.
 
 :class:`SurfaceParameters` holds what an optimiser updates and builds a
-:class:`~nurbskit.core.NURBSSurface` from it on every call (a cheap unvalidated
-``_replace``):
+:class:`~nurbskit.core.NURBSSurface` from it on every call (cheap: built with
+``validate=False``):
 
 * control points as a free tensor; a surface *closed in v* stores only the
   ``n_v - q`` distinct columns and wraps the first ``q`` onto the end, with uniform
