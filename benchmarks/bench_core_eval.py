@@ -21,6 +21,13 @@ Peers in the same process:
 * a floor: the two dense matrix products a grid needs at least,
   ``(R x n)(n x n D)`` and ``(R D x n)(n x R)`` on precomputed operands.
 
+On CUDA each grid also times the forward + backward step captured once as a CUDA graph
+(``torch.cuda.graph``: the whole step, loss and backward included, replayed as one
+launch; PyTorch's "whole-network capture"), ours and NURBS-Diff's alike (a peer that
+cannot be captured is reported with the reason), and checks that the replayed gradients
+equal the eager ones. Eager, both are bound by per-operation overhead at these sizes
+(``benchmarks/README.md``); the graph is what a training loop with fixed shapes can use.
+
 Loop overhead (the batch part): the loop's per-surface cost beyond the arithmetic, timed on a
 2 x 2 grid, and the ceiling ``(arithmetic + 64 x overhead) / arithmetic`` it allows the
 batch-vs-loop ratio (see ``loop_overhead``).
@@ -96,6 +103,46 @@ def floor_time(n: int, r: int, device: str, sync) -> float:
     return timeit(two, repeats=9, min_time=0.05, sync=sync)
 
 
+def captured(step, leaves) -> tuple[object, str]:
+    """``step()`` (forward, loss, backward) captured as a CUDA graph -> ``(graph.replay, "")``,
+    or ``(None, why)`` when capture fails. Warm-up on a side stream, then ``.grad`` of
+    ``leaves`` set to None so that the captured backward allocates them from the graph's
+    pool: every replay writes the gradients of the current values of the (static) leaves
+    into the same tensors (the pattern of PyTorch's CUDA-graphs notes)."""
+    try:
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            for _ in range(3):
+                step()
+        torch.cuda.current_stream().wait_stream(side)
+        for t in leaves:
+            t.grad = None
+        graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(graph):
+            step()
+    except Exception as exc:  # noqa: BLE001 - a peer that cannot be captured is reported, not fatal
+        return None, f"{type(exc).__name__}: {str(exc)[:200]}"
+    return graph.replay, ""
+
+
+def graph_rows(prefix: str, step, leaves, sync, reps: int) -> dict:
+    """Time ``step`` captured as a CUDA graph, and the largest difference between the
+    gradients of a replay and those of the eager step (both on the leaves' current values)."""
+    replay, why = captured(step, leaves)
+    if replay is None:
+        return {f"{prefix}fwd_bwd_graph": f"not captured: {why}"}
+    replay()
+    sync()
+    replayed = [t.grad.clone() for t in leaves]
+    for t in leaves:
+        t.grad = None
+    step()
+    diff = max(float((a - t.grad).abs().max()) for a, t in zip(replayed, leaves))
+    return {f"{prefix}fwd_bwd_graph_ms": timeit(replay, repeats=reps, min_time=0.05, sync=sync) * 1e3,
+            f"{prefix}graph_grad_diff": diff}
+
+
 def peer_rows(SurfEval, base: NURBSSurface, r: int, device: str, sync, reps: int) -> dict:
     n_u, n_v = base.sizes
     layer = SurfEval(n_u - 1, n_v - 1, dimension=3, p=3, q=3, out_dim_u=r, out_dim_v=r, device=device)
@@ -119,8 +166,11 @@ def peer_rows(SurfEval, base: NURBSSurface, r: int, device: str, sync, reps: int
 
     t_f = timeit(forward, repeats=reps, min_time=0.05, sync=sync)
     t_fb = timeit(fwd_bwd, repeats=reps, min_time=0.05, sync=sync)
-    return {"nurbsdiff_forward_ms": t_f * 1e3, "nurbsdiff_fwd_bwd_ms": t_fb * 1e3,
-            "nurbsdiff_nan": nan, "nurbsdiff_max_err": err, "nurbsdiff_outputs": int(out.numel())}
+    row = {"nurbsdiff_forward_ms": t_f * 1e3, "nurbsdiff_fwd_bwd_ms": t_fb * 1e3,
+           "nurbsdiff_nan": nan, "nurbsdiff_max_err": err, "nurbsdiff_outputs": int(out.numel())}
+    if device.startswith("cuda"):
+        row.update(graph_rows("nurbsdiff_", fwd_bwd, [Pg], sync, reps))
+    return row
 
 
 def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict]:
@@ -178,6 +228,8 @@ def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict
                 "naive_loop_ms_est": loop_per_point * n_points * 1e3,
                 "speedup_vs_naive_loop": loop_per_point * n_points / t_f,
             }
+            if device.startswith("cuda"):
+                row.update(graph_rows("", fwd_bwd, [cp, w], sync, reps))
             if geomdl_per_point is not None:
                 row["geomdl_ms_est"] = geomdl_per_point * n_points * 1e3
                 row["speedup_vs_geomdl"] = geomdl_per_point * n_points / t_f
@@ -186,6 +238,10 @@ def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict
                 row.update(peer_rows(SurfEval, base, r, device, sync, reps))
                 row["x_nurbsdiff_fwd_bwd"] = row["nurbsdiff_fwd_bwd_ms"] / row["fwd_bwd_ms"]
                 row["x_nurbsdiff_forward"] = row["nurbsdiff_forward_ms"] / row["forward_ms"]
+                if "fwd_bwd_graph_ms" in row:
+                    row["x_nurbsdiff_eager_graph"] = row["nurbsdiff_fwd_bwd_ms"] / row["fwd_bwd_graph_ms"]
+                    if "nurbsdiff_fwd_bwd_graph_ms" in row:
+                        row["x_nurbsdiff_graph_graph"] = row["nurbsdiff_fwd_bwd_graph_ms"] / row["fwd_bwd_graph_ms"]
             elif SurfEval is None:
                 row["nurbsdiff"] = f"skipped: {peer_reason}"
             rows.append(row)
@@ -352,6 +408,12 @@ def main() -> None:
                ("x_nurbsdiff_fwd_bwd", "x NURBS-Diff (fwd+bwd)"), ("nurbsdiff_nan", "NURBS-Diff NaN"),
                ("nurbsdiff_max_err", "NURBS-Diff max err"), ("speedup_vs_geomdl", "x geomdl"),
                ("speedup_vs_naive_loop", "x naive loop")]
+    if args.device == "cuda":
+        columns += [("fwd_bwd_graph_ms", "fwd+bwd ms, CUDA graph"), ("graph_grad_diff", "graph vs eager grad diff"),
+                    ("nurbsdiff_fwd_bwd_graph_ms", "NURBS-Diff fwd+bwd ms, CUDA graph"),
+                    ("x_nurbsdiff_eager_graph", "NURBS-Diff eager / ours graph"),
+                    ("x_nurbsdiff_graph_graph", "NURBS-Diff graph / ours graph"),
+                    ("nurbsdiff_fwd_bwd_graph", "NURBS-Diff capture")]
     if rows:
         write_results("core_eval" + suffix, rows, columns, meta=meta,
                       title="Surface evaluation: forward and backward, degree 3, float32", subdir=subdir,
