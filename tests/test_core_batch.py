@@ -502,3 +502,36 @@ def test_a_surface_step_replays_as_a_cuda_graph():
     step()
     for got, expected in zip(replayed, (cp.grad, w.grad)):
         assert_close(got, expected, atol=1e-10 * float(expected.abs().max()))
+
+
+def test_weights_shared_by_a_batch_work_unvalidated_too():
+    # A fit loop builds its splines with validate=False; weights shared by the batch, (n)
+    # or (n_u, n_v), used to be expanded only when validated (evaluate crashed).
+    g = torch.Generator().manual_seed(4)
+    uv = torch.rand(7, 2, generator=g, dtype=torch.float64)
+    cases = [(NURBSSurface, torch.rand(2, 3, 5, 4, 3, generator=g, dtype=torch.float64),
+              torch.rand(5, 4, generator=g, dtype=torch.float64) + 0.5, (2, 3), uv),
+             (NURBSCurve, torch.rand(3, 5, 2, generator=g, dtype=torch.float64),
+              torch.rand(5, generator=g, dtype=torch.float64) + 0.5, 2, uv[:, 0])]
+    for cls, cp, w, degrees, t in cases:
+        checked, unchecked = (cls(cp, degrees, weights=w, validate=v) for v in (True, False))
+        for call in (lambda s: s.evaluate(t), lambda s: s.derivatives(t, 1), lambda s: s.sample(4)):
+            assert_close(call(unchecked), call(checked), atol=0.0)
+
+
+def test_sample_gradient_follows_the_domain_ends():
+    # The sample grid is uniform over the domain, so moving an end knot moves every sample:
+    # gradcheck against finite differences of the clamped end knots (they were detached).
+    g = torch.Generator().manual_seed(5)
+    cp = torch.rand(6, 5, 3, generator=g, dtype=torch.float64)
+    inner_u = torch.tensor([0.3, 0.55], dtype=torch.float64)
+    inner_v = torch.tensor([0.4], dtype=torch.float64)
+
+    def grid(a, b):
+        ku = torch.cat([a.expand(4), inner_u, b.expand(4)])
+        kv = torch.cat([a.expand(4), inner_v, b.expand(4)])
+        return NURBSSurface(cp, (3, 3), [ku, kv], validate=False).sample((5, 4))
+
+    ends = (torch.tensor(0.1, dtype=torch.float64, requires_grad=True),
+            torch.tensor(0.9, dtype=torch.float64, requires_grad=True))
+    assert gradcheck(grid, ends, eps=1e-6, atol=1e-8)

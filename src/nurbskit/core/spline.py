@@ -131,9 +131,9 @@ class TensorSpline:
             w = torch.ones(batch + sizes, dtype=dtype, device=device)
         else:
             w = _as_tensor(weights, dtype, device)
+            if tuple(w.shape) == sizes and batch:  # shared by the batch: a view, validated or not
+                w = w.expand(batch + sizes)
             if validate:
-                if tuple(w.shape) == sizes and batch:
-                    w = w.expand(batch + sizes)
                 if tuple(w.shape) != batch + sizes:
                     raise NurbskitError(
                         f"weights must have shape {batch + sizes} to match the control points, got {tuple(w.shape)}"
@@ -397,10 +397,13 @@ class TensorSpline:
 
     def grid_axes(self, resolution: int | Sequence[int]) -> list[Tensor]:
         """Uniformly spaced parameters over the domain, ends included, per direction:
-        ``(R_a,)``, or ``(*B, R_a)`` for a per-element knot vector. No host reads."""
+        ``(R_a,)``, or ``(*B, R_a)`` for a per-element knot vector. No host reads. The
+        parameters are data (detached from trainable knots); :meth:`sample`'s grid follows
+        the end knots, gradient included."""
         res = self._resolution(resolution)
         return [
-            _tp.uniform_axis(kv, p, n, r) for kv, p, n, r in zip(self.knot_vectors, self.degrees, self.sizes, res)
+            _tp.uniform_axis(kv.detach(), p, n, r)
+            for kv, p, n, r in zip(self.knot_vectors, self.degrees, self.sizes, res)
         ]
 
     def evaluate_grid(self, *axes, order: int = 0, extrapolate: bool = False) -> Tensor:

@@ -423,11 +423,13 @@ def uniform_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
     """``count`` evenly spaced parameters over the domain ``[knots[p], knots[n]]``, ends exact.
 
     Shapes: ``knots (m,)`` -> ``(count,)``; ``knots (*B, m)`` -> ``(*B, count)``. Computed on
-    the device from the (detached) end knots with ``torch.linspace``'s own formula
-    (from the start for the first half, from the end for the second), so nothing is read
-    back to the host and the last sample is the domain end exactly.
+    the device from the end knots with ``torch.linspace``'s own formula (from the start
+    for the first half, from the end for the second), so nothing is read back to the host
+    and the last sample is the domain end exactly. The parameters follow the end knots,
+    gradient included: a sample grid is uniform over the domain, so moving an end knot
+    moves every sample (what a finite difference of the end knot measures).
     """
-    k = knots.detach()
+    k = knots
     a, b = k[..., degree : degree + 1], k[..., n_ctrl : n_ctrl + 1]
     if count == 1:
         return a
