@@ -56,10 +56,12 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
     pts = result.points.detach().to(dtype=torch.float64, device="cpu")
     res = tuple(cfg.resolution)
     with torch.no_grad():
-        m = metrics.evaluate_fit(s, pts, res)
+        # one projection for both sets of numbers: the normalised copy is the same geometry scaled
+        to_surface = metrics.point_distances(s, pts)
+        m = metrics.evaluate_fit(s, pts, res, to_surface=to_surface)
         center = result.center.to(dtype=torch.float64, device="cpu")
         s_n = s._replace(control_points=(s.control_points - center) / result.scale)
-        m_n = metrics.evaluate_fit(s_n, (pts - center) / result.scale, res)
+        m_n = metrics.evaluate_fit(s_n, (pts - center) / result.scale, res, to_surface=to_surface / result.scale)
     last = result.history[-1] if result.history else {}
     report = {
         "pipeline": cfg.pipeline,
@@ -88,10 +90,7 @@ def fit_report(result: FitResult, *, distances: bool = False) -> dict:
         report["rms"] = rms
         report["rms_normalized"] = rms / result.scale
     if distances:
-        from ..core.project import project_points
-
-        with torch.no_grad():
-            report["_distances"] = project_points(s, pts).distance
+        report["_distances"] = to_surface
     return report
 
 
@@ -128,10 +127,7 @@ def write_fit_outputs(
         from ..viz import plots
 
         if distances is None:
-            from ..core.project import project_points
-
-            with torch.no_grad():
-                distances = project_points(s, points).distance
+            distances = metrics.point_distances(s, points)
         name = result.config.pipeline
         plots.plot_wireframe(grid, d / "wireframe.png", title=f"{name}: output grid {res[0]} x {res[1]}")
         plots.plot_clouds(points, grid, s.control_points, d / "clouds.png",
