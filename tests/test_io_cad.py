@@ -10,6 +10,7 @@ own STL, shoelace areas in closed form.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,6 +127,20 @@ def test_step_and_brep_round_trip_exactly(tmp_path, ext):
         t = grid(c, 21)
         assert back.domain == c.domain
         assert_close(back.evaluate(t), c.evaluate(t), atol=1e-12)
+
+
+def test_a_closed_fit_with_two_poles_exports_to_step(tmp_path):
+    # tests/data/pole_seam_fit.json: make demo's default fit of the thesis duck (periodic in
+    # v, both u ends collapsed to poles, rational). STEP holds no degenerate edge, so its
+    # face is written as a loop of the seam edges alone; the check's reader must add the
+    # edges at the poles, as any reader does (it refused the file as invalid before).
+    s = nurbskit.load(Path(__file__).parent / "data" / "pole_seam_fit.json")
+    for ext in (".step", ".iges", ".brep"):
+        report = cad.write_cad(s, tmp_path / f"fit{ext}")
+        assert report["valid"] and report["faces"] == 1
+        back = cad.read_cad(tmp_path / f"fit{ext}").faces[0].surface
+        uv = grid(s, 11)
+        assert_close(back.evaluate(uv), s.evaluate(uv), atol=1e-12 * diagonal(s))
 
 
 def test_step_keeps_large_coordinates_to_the_last_bit(tmp_path):

@@ -265,9 +265,14 @@ def _transfer(reader, fmt: str, heal: bool) -> int:
 #: pcurves one period off), and for IGES, joining a face's boundary curves into closed
 #: wires: IGES trimmed surfaces (entity 144) hold curves without vertices (and where a
 #: boundary passes through a surface's pole, as on a sphere, the degenerate edge there;
-#: a seam that IGES keeps only as a curve in (u, v) gets its 3-D curve).
+#: a seam that IGES keeps only as a curve in (u, v) gets its 3-D curve). STEP has no
+#: degenerate edge either: a face bounded by a pole (a closed fit's pole rows) is written
+#: with a loop of its seam edges alone, so the reader adds the degenerate edge that closes
+#: the loop in (u, v) (``FixLackingMode``, ``ClosedWireMode``), as for IGES; without it the
+#: demo's fit of the duck (periodic in v, two poles, rational) was refused as invalid.
 CHECK_READ_FIXES = {
-    "step": ("FixFreeShellMode", "FixFaceMode", "FixWireMode", "FixEdgeCurvesMode", "FixShiftedMode"),
+    "step": ("FixFreeShellMode", "FixFaceMode", "FixWireMode", "FixEdgeCurvesMode", "FixShiftedMode",
+             "FixLackingMode", "ClosedWireMode"),
     "iges": ("FixFreeFaceMode", "FixWireMode", "FixConnectedMode", "ClosedWireMode", "FixLackingMode",
              "FixEdgeCurvesMode", "FixAddCurve3dMode"),
 }
