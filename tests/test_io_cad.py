@@ -446,6 +446,48 @@ def test_patches_json_exports_to_step_and_reads_back_valid(tmp_path):
     assert len(data["surfaces"]) == 4 and sum("trim" in s for s in data["surfaces"]) == 1
 
 
+def test_the_index_that_nurbskit_patches_writes_exports_its_faces(tmp_path):
+    # `nurbskit patches` writes patches.json as an index: per patch its summary and the
+    # files of its faces (patches/NNN.json); export follows the index, inside the folder only.
+    from nurbskit.cli import main
+
+    patches = _patch_set()
+    (tmp_path / "patches").mkdir()
+    index = []
+    for i, p in enumerate(patches):
+        name = f"patches/{i:03d}.json"
+        data = p.to_dict() if isinstance(p, TrimmedSurface) else nurbskit.core.serialize.to_dict(p)
+        (tmp_path / name).write_text(json.dumps(data))
+        index.append({"index": i, "files": [name], "inliers": 10})
+    (tmp_path / "patches.json").write_text(json.dumps({"patches": index, "history": []}))
+    for src in (tmp_path / "patches.json", tmp_path):  # the file or its folder
+        out = tmp_path / "out.step"
+        out.unlink(missing_ok=True)
+        assert main(["export", str(src), str(out)]) == 0
+        assert cad.cad_info(out)["num_faces"] == len(patches)
+    (tmp_path / "patches.json").write_text(json.dumps({"patches": [{"files": ["../outside.json"]}]}))
+    with pytest.raises(NurbskitError, match="lies outside"):
+        cad.read_objects(tmp_path / "patches.json")
+
+
+def test_a_batch_exports_one_face_per_element(tmp_path):
+    # A nurbskit JSON batch (3, 2) of surfaces: export writes each element as one face (it
+    # crashed in OpenCASCADE's point constructor); the library's converter refuses a batch.
+    from nurbskit.cli import main
+
+    g = torch.Generator().manual_seed(3)
+    batch = nurbskit.NURBSSurface(torch.rand(3, 2, 4, 5, 3, generator=g, dtype=torch.float64), (3, 2))
+    nurbskit.save(batch, tmp_path / "b.json")
+    assert main(["export", str(tmp_path / "b.json"), str(tmp_path / "b.step")]) == 0
+    faces = cad.read_cad(tmp_path / "b.step").faces
+    assert len(faces) == 6
+    uv = grid(batch[0, 0], 5)
+    for face, (i, j) in zip(faces, [(i, j) for i in range(3) for j in range(2)]):
+        assert_close(face.surface.evaluate(uv), batch[i, j].evaluate(uv), atol=1e-12)
+    with pytest.raises(NurbskitError, match="select an element first"):
+        cad.write_cad(batch, tmp_path / "direct.step")
+
+
 def test_closed_mesh_becomes_a_valid_solid_of_the_same_volume(tmp_path):
     import trimesh
     from OCP.BRepGProp import BRepGProp

@@ -242,3 +242,22 @@ def test_patches_result_exports_to_step_and_reads_back_valid(tmp_path):
     assert info["valid"] and len(info["faces"]) == 3
     model = read_cad(out / "patches.step")
     assert all(face.outer is not None for face in model.faces)
+
+
+def test_a_result_commands_format_option_says_what_the_format_leaves_out(tmp_path, capsys):
+    # `nurbskit patches --format 3dm` wrote trimmed patches untrimmed without a word;
+    # the result commands now say it as `nurbskit export` does.
+    require_extra("rhino3dm")
+    from argparse import Namespace
+
+    from nurbskit.cli.export_command import write_requested_format
+
+    s = random_surface(np.random.default_rng(5), (3, 3))
+    (a, b), (c, d) = s.domain
+    loop = TrimLoop.from_uv([[a + 0.2 * (b - a), c + 0.2 * (d - c)], [b - 0.1 * (b - a), c + 0.3 * (d - c)],
+                             [a + 0.4 * (b - a), d - 0.1 * (d - c)]])
+    args = Namespace(export_format="3dm", export_tolerance=None, command="patches")
+    write_requested_format(args, [TrimmedSurface(s, [loop])], tmp_path, "patches")
+    assert (tmp_path / "patches.3dm").is_file()
+    assert capsys.readouterr().err == ("nurbskit patches: note: .3dm cannot store trimming loops; "
+                                       "left out of patches.3dm\n")

@@ -78,10 +78,21 @@ def check_format_options(args) -> None:
 
 
 def write_requested_format(args, obj, folder, stem: str) -> None:
-    """With ``--format F`` (see :func:`add_format_option`), write ``obj`` as ``folder/stem.F``."""
+    """With ``--format F`` (see :func:`add_format_option`), write ``obj`` as ``folder/stem.F``
+    (and say what that format cannot store, as ``nurbskit export`` does)."""
     if args.export_format:
-        write_result(obj, Path(folder) / f"{stem}.{args.export_format}", format=args.export_format,
-                     tolerance=args.export_tolerance, tolerance_option="--mesh-tolerance")
+        name = f"{stem}.{args.export_format}"
+        report = write_result(obj, Path(folder) / name, format=args.export_format,
+                              tolerance=args.export_tolerance, tolerance_option="--mesh-tolerance")
+        say_left_out(report, name, f"nurbskit {args.command}")
+
+
+def say_left_out(report: dict, name, command: str) -> None:
+    """One line on stderr when the written format left something out (``report["left_out"]``)."""
+    if report.get("left_out"):
+        suffix = Path(name).suffix
+        sys.stderr.write(f"{command}: note: {suffix} cannot store {', '.join(report['left_out'])}; "
+                         f"left out of {name}\n")
 
 
 def write_result(obj, path, format: str | None = None, tolerance: float | None = None, *,
@@ -106,9 +117,7 @@ def run_export(args) -> int:
     if "triangles" in report:
         parts.append(f", {report['triangles']:,} triangles")
     sys.stderr.write("nurbskit export: " + "".join(parts) + ")\n")
-    if report.get("left_out"):
-        sys.stderr.write(f"nurbskit export: note: {out.suffix} cannot store {', '.join(report['left_out'])}; "
-                         f"left out of {out}\n")
+    say_left_out(report, out, "nurbskit export")
     return 0
 
 

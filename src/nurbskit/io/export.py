@@ -36,6 +36,14 @@ def read_exportable(path: str | os.PathLike) -> list:
     return read_objects(path)
 
 
+def _elements(obj) -> list:
+    """A batch of splines as its elements (in order, every batch axis flattened), so that
+    each is written as one face or curve; anything else as it is."""
+    if not getattr(obj, "batch_shape", ()):
+        return [obj]
+    return [e for i in range(obj.batch_shape[0]) for e in _elements(obj[i])]
+
+
 #: The geometry file of each kind of nurbskit output folder, in the order looked for:
 #: `nurbskit patches` (patches.json), `fit` and `shape` (surface.json), `volume` (volume.json).
 FOLDER_FILES = ("patches.json", "surface.json", "volume.json")
@@ -102,7 +110,7 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
         raise OptionError(f"{out}: is a directory, expected an output file name")
     check_not_input(out, [src])
     check_tolerance(tolerance, tolerance_option)
-    obj = read_exportable(src)
+    obj = [element for o in read_exportable(src) for element in _elements(o)]
     try:
         return write_result(obj, out, format=format, tolerance=tolerance, check=check,
                             analytic=analytic, tolerance_option=tolerance_option)

@@ -427,6 +427,24 @@ def read_objects(path: str | os.PathLike) -> list:
     return found
 
 
+def _indexed_files(index: Path, files: list, where: str) -> list:
+    """The faces that an entry of ``nurbskit patches``' ``patches.json`` lists under
+    ``files`` (paths relative to its folder, e.g. ``patches/001_1.json``); a name that
+    leaves the folder is refused."""
+    root = index.parent.resolve()
+    out = []
+    for j, name in enumerate(files):
+        if not isinstance(name, str) or not name:
+            raise InputError(f"{where}[files][{j}]: expected a file name, found {name!r}")
+        target = (index.parent / name).resolve()
+        if Path(name).is_absolute() or root not in target.parents:
+            raise InputError(f"{where}[files][{j}]: {name!r} lies outside {index.parent}")
+        if not target.is_file():
+            raise InputError(f"{where}[files][{j}]: {index.parent / name} does not exist")
+        out.extend(_read_json_objects(target))
+    return out
+
+
 def _read_json_objects(path: Path) -> list:
     from ...core.serialize import from_dict
     from .._json import load_json
@@ -449,6 +467,9 @@ def _read_json_objects(path: Path) -> list:
             out = []
             for i, item in enumerate(data[key]):
                 where = f"{path}[{key}][{i}]"
+                if isinstance(item, dict) and "format" not in item and isinstance(item.get("files"), list):
+                    out.extend(_indexed_files(path, item["files"], where))  # `nurbskit patches`' index
+                    continue
                 if isinstance(item, dict) and isinstance(item.get("surface"), dict):  # {"surface": {...}, "trim": [...]}
                     item = {**item["surface"], **({"trim": item["trim"]} if "trim" in item else {})}
                 if not isinstance(item, dict):

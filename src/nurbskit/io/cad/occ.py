@@ -122,6 +122,7 @@ def _axis_form(flat, degree, cp, w, axis, periodic):
 def curve_to_occ(curve: NURBSCurve, periodic: bool | str = "auto"):
     """A ``Geom_BSplineCurve`` equal to ``curve`` (3-D; 2-D curves at z = 0)."""
     ocp()
+    curve.require_single("an OpenCASCADE curve")
     from OCP.collections import Array1_gp_Pnt
     from OCP.Geom import Geom_BSplineCurve
     from OCP.gp import gp_Pnt
@@ -181,6 +182,7 @@ def curve_from_occ(geom, dtype=torch.float64) -> NURBSCurve:
 
 def surface_to_occ(surface: NURBSSurface, periodic: bool | str = "auto"):
     """A ``Geom_BSplineSurface`` equal to ``surface`` (u is OCC's U, v its V)."""
+    surface.require_single("an OpenCASCADE face")
     ocp()
     from OCP.collections import Array2_double, Array2_gp_Pnt
     from OCP.Geom import Geom_BSplineSurface

@@ -101,6 +101,7 @@ def _geometry(path: Path, obj: TensorSpline):
     rh = _rhino()
     if obj.kind not in ("curve", "surface"):
         raise OptionError(f"{path}: .3dm holds curves and surfaces; got a {obj.kind}")
+    obj.require_single(f"writing {path.name} (3dm)")
     if obj.dim not in (2, 3):
         raise OptionError(f"{path}: .3dm control points are 2-D or 3-D; got {obj.dim}-D")
     cp = obj.control_points.detach().cpu().double().numpy()
