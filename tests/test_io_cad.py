@@ -488,6 +488,21 @@ def test_a_batch_exports_one_face_per_element(tmp_path):
         cad.write_cad(batch, tmp_path / "direct.step")
 
 
+def test_convert_refuses_a_cad_file_of_several_faces(tmp_path, capsys):
+    # convert writes one NURBS object; it wrote a STEP file's first face alone, untrimmed,
+    # without a word. A file of one untrimmed face still converts.
+    from _cli import refused, run
+
+    surfaces, _ = _random_set(12)
+    cad.write_cad(surfaces[:2], tmp_path / "two.step", sew_tolerance=None)
+    refused(capsys, ["convert", tmp_path / "two.step", tmp_path / "two.json"], "holds 2 faces", "nurbskit export")
+    assert not (tmp_path / "two.json").exists()
+    cad.write_cad(surfaces[2], tmp_path / "one.step")
+    assert run(["convert", str(tmp_path / "one.step"), str(tmp_path / "one.json")]) == 0
+    uv = grid(surfaces[2], 7)
+    assert_close(nurbskit.load(tmp_path / "one.json").evaluate(uv), surfaces[2].evaluate(uv), atol=1e-12)
+
+
 def test_closed_mesh_becomes_a_valid_solid_of_the_same_volume(tmp_path):
     import trimesh
     from OCP.BRepGProp import BRepGProp

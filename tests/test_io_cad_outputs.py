@@ -261,3 +261,29 @@ def test_a_result_commands_format_option_says_what_the_format_leaves_out(tmp_pat
     assert (tmp_path / "patches.3dm").is_file()
     assert capsys.readouterr().err == ("nurbskit patches: note: .3dm cannot store trimming loops; "
                                        "left out of patches.3dm\n")
+
+
+def test_3dm_breps_are_read_only_when_they_are_one_untrimmed_surface(tmp_path):
+    # A trimmed face read without its trim is another shape (a disk read as its square), and
+    # polysurfaces were skipped without a word: both are refused; a Brep that is one
+    # untrimmed surface reads as that surface.
+    rhino3dm = require_extra("rhino3dm")
+    from nurbskit.io.cad import read_3dm_all
+
+    plane = rhino3dm.NurbsSurface.Create(3, False, 2, 2, 2, 2)  # bilinear: (u, v) -> (2 u, v, 0)
+    for i in range(2):
+        for j in range(2):
+            plane.Points[(i, j)] = rhino3dm.Point4d(2.0 * i, 1.0 * j, 0.0, 1.0)
+    for knots in (plane.KnotsU, plane.KnotsV):
+        knots[0], knots[1] = 0.0, 1.0
+    model = rhino3dm.File3dm()
+    model.Objects.AddBrep(rhino3dm.Brep.CreateFromSurface(plane))
+    model.Write(str(tmp_path / "plain.3dm"), 7)
+    (back,) = read_3dm_all(tmp_path / "plain.3dm")
+    assert_close(back.evaluate(torch.tensor([[1.0, 1.0]], dtype=torch.float64)),
+                 torch.tensor([[2.0, 1.0, 0.0]], dtype=torch.float64), atol=1e-15)
+    model = rhino3dm.File3dm()
+    model.Objects.AddBrep(rhino3dm.Brep.CreateFromBox(rhino3dm.Box(rhino3dm.BoundingBox(0, 0, 0, 1, 2, 3))))
+    model.Write(str(tmp_path / "box.3dm"), 7)
+    with pytest.raises(nurbskit.NurbskitError, match="1 trimmed or multi-face Brep"):
+        read_3dm_all(tmp_path / "box.3dm")

@@ -212,6 +212,19 @@ def _inputs(args, src) -> list:
     return found
 
 
+def _one_untrimmed_object(src: Path, out: Path) -> None:
+    """``convert`` writes one NURBS object: a CAD file of several faces or curves, or of a
+    trimmed face, is refused (read as its first face, untrimmed, it would lose the rest)."""
+    from ..io.cad import read_objects
+
+    found = read_objects(src)
+    trimmed = sum(1 for o in found if getattr(o, "loops", None))
+    if len(found) > 1 or trimmed:
+        what = f"{len(found)} faces and curves" if len(found) > 1 else "a trimmed face"
+        raise OptionError(f"{src}: holds {what}; convert writes one untrimmed NURBS object: "
+                          f"`nurbskit export {src} {out.with_suffix('.json')}` keeps every face with its trim")
+
+
 def run_convert(args) -> int:
     from ..io import formats
     from ..io.mesh import write_mesh
@@ -238,6 +251,8 @@ def run_convert(args) -> int:
         raise OptionError(f"--ascii applies to .ply, .stl and .pcd outputs; {out_ext or 'no extension'!r} has one form")
     with _progress(2, "convert") as bar:
         if is_nurbs_file(src):
+            if src.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep", ".3dm"):
+                _one_untrimmed_object(src, out)
             obj = read_nurbs(src, **_nurbs_kwargs(args))
             bar.update(1)
             if out_ext not in (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm"):

@@ -41,21 +41,36 @@ def _geometry_of(obj):
         return geo.ToNurbsCurve()
     if isinstance(geo, rh.Surface):
         return geo.ToNurbsSurface()
-    if isinstance(geo, rh.Brep) and len(geo.Faces) == 1:
+    if isinstance(geo, rh.Brep) and geo.IsSurface:  # one face, untrimmed
         return geo.Faces[0].ToNurbsSurface()
     return None
 
 
-def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
-    """The ``index``-th NURBS curve or surface of a ``.3dm`` file (other objects are skipped)."""
+def _read_model(path: Path):
+    """The rhino3dm model of ``path`` and its NURBS curves and surfaces, in order. Breps that
+    are not one untrimmed surface (trimmed faces, polysurfaces) are refused: read without
+    their trims they would be other shapes (a trimmed disk read as its square)."""
     rh = _rhino()
-    path = Path(path)
     model = rh.File3dm.Read(str(path))
     if model is None:
         raise InputError(f"{path}: rhino3dm could not read it as a .3dm file")
+    breps = sum(1 for o in model.Objects if isinstance(o.Geometry, rh.Brep) and not o.Geometry.IsSurface)
+    if breps:
+        raise InputError(f"{path}: holds {breps} trimmed or multi-face Brep(s) (polysurfaces), which nurbskit "
+                         "does not read from .3dm; save them as STEP or IGES, read with their trims")
     found = [g for g in (_geometry_of(o) for o in model.Objects) if g is not None]
     if not found:
         raise InputError(f"{path}: holds no NURBS curve or surface")
+    return found
+
+
+def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
+    """The ``index``-th NURBS curve or surface of a ``.3dm`` file (meshes, points and other
+    objects are skipped; a Brep counts when it is one untrimmed surface, and any other Brep
+    is refused)."""
+    rh = _rhino()
+    path = Path(path)
+    found = _read_model(path)
     if not -len(found) <= index < len(found):
         raise OptionError(f"{path}: index {index} is out of range; the file holds {len(found)} curves/surfaces")
     geo = found[index]
@@ -136,15 +151,8 @@ def _geometry(path: Path, obj: TensorSpline):
 
 def read_3dm_all(path: str | os.PathLike) -> list[TensorSpline]:
     """Every NURBS curve and surface of a ``.3dm`` file, in the file's order."""
-    rh = _rhino()
     path = Path(path)
-    model = rh.File3dm.Read(str(path))
-    if model is None:
-        raise InputError(f"{path}: rhino3dm could not read it as a .3dm file")
-    count = sum(1 for o in model.Objects if _geometry_of(o) is not None)
-    if count == 0:
-        raise InputError(f"{path}: holds no NURBS curve or surface")
-    return [read_3dm(path, index=i) for i in range(count)]
+    return [read_3dm(path, index=i) for i in range(len(_read_model(path)))]
 
 
 def write_3dm_objects(path: str | os.PathLike, objects) -> list[str]:
