@@ -503,6 +503,19 @@ def test_convert_refuses_a_cad_file_of_several_faces(tmp_path, capsys):
     assert_close(nurbskit.load(tmp_path / "one.json").evaluate(uv), surfaces[2].evaluate(uv), atol=1e-12)
 
 
+def test_a_truncated_step_file_is_refused_not_read_in_part(tmp_path):
+    # Cut in the middle, a STEP file of 9 faces still loaded some of them with OCC's
+    # unresolved-reference failures, and passed for the whole model.
+    surfaces, _ = _random_set(11)
+    cad.write_cad(surfaces, tmp_path / "set.step", sew_tolerance=None)
+    lines = (tmp_path / "set.step").read_text().splitlines(keepends=True)
+    cut = max(i for i in range(len(lines) // 2) if lines[i].rstrip().endswith(";")) + 1  # after a whole entity
+    (tmp_path / "half.step").write_text("".join(lines[:cut] + lines[-3:]))  # and ENDSEC, END-ISO
+    with pytest.raises(NurbskitError, match="load failures"):
+        cad.read_cad(tmp_path / "half.step")
+    assert len(cad.read_cad(tmp_path / "set.step").faces) == len(surfaces)
+
+
 def test_closed_mesh_becomes_a_valid_solid_of_the_same_volume(tmp_path):
     import trimesh
     from OCP.BRepGProp import BRepGProp

@@ -220,6 +220,11 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
     status = reader.ReadFile(str(path))
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise InputError(f"{path}: OpenCASCADE could not read it as {fmt.upper()} ({status.name})")
+    if not reader.WS().ModelCheckList(False).IsEmpty(True):
+        # failures while loading the entities (a truncated file's unresolved references):
+        # what translates is part of the model, and it would pass for the whole
+        raise InputError(f"{path}: the {fmt.upper()} file has load failures (unresolved references or damaged "
+                         "entities: truncated or corrupt?); refusing to read part of it")
     with _TRANSLATOR_LOCK:
         transferred = _transfer(reader, fmt, heal)
     if transferred == 0:
