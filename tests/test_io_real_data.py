@@ -140,6 +140,10 @@ def test_kinect_pcd_binary_compressed(shared_data, name, kept, dropped, labels):
     assert cloud.colors.shape == (kept, 4) and cloud.colors.dtype == np.uint8
     # a Kinect sees between half a metre and a few metres
     assert 0.3 < cloud.points[:, 2].min() and cloud.points[:, 2].max() < 5
+    # `nurbskit info` counts the labels of the points, not the label of the NaN holes
+    from nurbskit.cli.io_commands import describe
+
+    assert describe(shared_data / "kinect_scans" / name)["num_labels"] == len(labels)
 
 
 def test_kinect_pcd_decoder_agrees_with_python_lzf(shared_data):

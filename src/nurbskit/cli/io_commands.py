@@ -149,8 +149,9 @@ def describe(path: str | Path, **nurbs_options) -> dict:
     }
     if not finite.all():
         info["dropped_nan_points"] = int((~finite).sum())
-    if payload.labels is not None:
-        info["num_labels"] = int(np.unique(payload.labels).size)
+    if payload.labels is not None:  # of the points counted (a PCD's NaN holes carry a label too)
+        labels = np.asarray(payload.labels).reshape(-1)
+        info["num_labels"] = int(np.unique(labels[finite] if pcd and labels.shape[0] == pts.shape[0] else labels).size)
     for key in ("width", "height"):
         if key in payload.info:
             info[key] = payload.info[key]
