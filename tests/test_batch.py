@@ -607,7 +607,7 @@ def test_inputs_files_folders_globs_and_unique_names(tmp_path):
     fit = get_command("fit")
     items = find_items([a, str(b / "*.xyz"), a / "x.xyz"], fit)
     names = {Path(i.paths[0]).relative_to(tmp_path).as_posix(): i.name for i in items}
-    assert names == {"a/x.ply": "x.ply", "a/x.xyz": "a_x.xyz", "b/x.xyz": "b_x.xyz", "a/deeper/y.off": "y",
+    assert names == {"a/x.ply": "x.ply", "a/x.xyz": "a_x", "b/x.xyz": "b_x", "a/deeper/y.off": "y",
                      "b/summary.json.xyz": "summary.json_"}
     with pytest.raises(InputError, match="no file matches"):
         find_items([str(tmp_path / "*.nothing")], fit)
@@ -897,7 +897,7 @@ def test_folder_search_skips_folders_nurbskit_wrote(tmp_path):
 
 
 def test_resume_keeps_the_names_an_earlier_run_gave(tmp_path):
-    # adding b/x.png beside a/x.png renames a's item ("x" -> "a_x.png"); on --resume the
+    # adding b/x.png beside a/x.png renames a's item ("x" -> "a_x"); on --resume the
     # finished folder's name is kept, so its result is reused, not recomputed beside it
     from nurbskit.batch.commands import Item
     from nurbskit.batch.task import fingerprint
@@ -912,6 +912,6 @@ def test_resume_keeps_the_names_an_earlier_run_gave(tmp_path):
     (out / "x" / MARKER).write_text(json.dumps({"version": 1, "command": "curves", "options": [],
                                                  "inputs": fingerprint(first), "record": {"status": "ok"}}))
     items = assign_names([Item(name="x", inputs=(("input", str(p)),), source=str(p)) for p in (a, b)])
-    assert [i.name for i in items] == ["a_x.png", "b_x.png"]
-    assert [i.name for i in runner.kept_names(items, out)] == ["x", "b_x.png"]
-    assert [i.name for i in runner.kept_names(items, tmp_path / "empty")] == ["a_x.png", "b_x.png"]
+    assert [i.name for i in items] == ["a_x", "b_x"]
+    assert [i.name for i in runner.kept_names(items, out)] == ["x", "b_x"]
+    assert [i.name for i in runner.kept_names(items, tmp_path / "empty")] == ["a_x", "b_x"]

@@ -101,8 +101,10 @@ def assign_names(items: list[Item]) -> list[Item]:
     """Unique, filesystem-safe output names, deterministic for a given list of items.
 
     An item keeps its own name (a file's stem) when no other item claims it; clashing
-    items are told apart by their file name, then by their parent folders, then by a
-    number (``cloud``, ``a_cloud.ply`` and ``b_cloud.ply``, ``cloud-2``).
+    items are told apart by their file name, then by their parent folders with the stem,
+    then with the file name, then by a number (``cloud``; ``cloud.ply`` beside
+    ``cloud.xyz``; ``a_cloud`` and ``b_cloud``, as ``fits/a/surface.json`` and
+    ``fits/b/surface.json`` give ``a_surface`` and ``b_surface``; ``cloud-2``).
     """
     def candidates(item: Item) -> list[str]:
         first = Path(item.paths[0])
@@ -110,7 +112,8 @@ def assign_names(items: list[Item]) -> list[Item]:
         if item.name == first.stem:
             out.append(_safe(first.name))
             parts = first.resolve().parts[1:-1]
-            out += [_safe("_".join([*parts[len(parts) - depth:], first.name])) for depth in range(1, len(parts) + 1)]
+            for depth in range(1, len(parts) + 1):
+                out += [_safe("_".join([*parts[len(parts) - depth:], leaf])) for leaf in (first.stem, first.name)]
         return out
 
     options = [candidates(it) for it in items]

@@ -277,7 +277,7 @@ def kept_names(items: list[Item], out: Path) -> list[Item]:
     """``items`` with the folder names an earlier run in ``out`` gave the same inputs.
 
     Names are unique among a run's items, so adding inputs can rename an item (``x.png``
-    becomes ``a_x.png`` beside ``b/x.png``); on ``--resume`` an item whose inputs (paths)
+    becomes ``a_x`` beside ``b/x.png``); on ``--resume`` an item whose inputs (paths)
     a finished folder's marker lists keeps that folder's name, when no other item has it.
     """
     earlier: dict[tuple, str] = {}

@@ -216,10 +216,10 @@ def run_fit(args) -> int:
     line = (
         f"{cfg.pipeline}: {report['iterations']} iterations in {report['seconds']:.2f} s; "
         f"input-to-surface mean {m['to_surface_mean']:.2e}, p95 {m['to_surface_p95']:.2e} of the diagonal; "
-        f"combined metric {m['combined']:.4g}"
+        f"combined metric {report['metrics_normalized']['combined']:.4g} (at a unit diagonal)"
     )
     if "rms_normalized" in report:
         line += f"; RMS to target {report['rms_normalized']:.2e} of the diagonal"
     print(line)
-    print(f"wrote {args.out}/: " + ", ".join(report["files"]))
+    print(f"wrote {Path(args.out)}/: " + ", ".join(report["files"]))
     return 0

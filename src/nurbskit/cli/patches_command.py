@@ -149,5 +149,5 @@ def run_patches(args) -> int:
     if "iou" in m:
         line += f", IoU {m['iou']:.1f} %"
     print(line)
-    print(f"wrote {args.out}/: " + ", ".join(report["files"]))
+    print(f"wrote {Path(args.out)}/: " + ", ".join(report["files"]))
     return 0

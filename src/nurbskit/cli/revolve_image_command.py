@@ -152,7 +152,7 @@ def run_revolve_image(args) -> int:
     print(f"revolution from {path.name}: axis x = {res.axis['point'][0]:.2f} px, symmetry residual "
           f"{res.symmetry_residual:.2f} px RMS, {res.rows.shape[0]} rows, profile of "
           f"{res.profile.control_points.shape[0]} control points ({res.background} background)")
-    print(f"wrote {args.out}/: " + ", ".join(files))
+    print(f"wrote {Path(args.out)}/: " + ", ".join(files))
     if res.ignored_objects:
         n = len(res.ignored_objects)
         sys.stderr.write(

@@ -170,5 +170,5 @@ def run_shape(args) -> int:
             f"nurbskit shape: warning: poor fit: mean distance {m['to_surface_mean']:.2e} of the diagonal "
             f"exceeds {POOR_FIT:.0e}; the input may not be a {fit.kind}\n"
         )
-    print(f"wrote {args.out}/: " + ", ".join(files))
+    print(f"wrote {Path(args.out)}/: " + ", ".join(files))
     return 0
