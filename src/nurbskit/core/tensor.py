@@ -555,6 +555,9 @@ class _SurfaceGrid(torch.autograd.Function):
     the same size, instead of autograd through a division broadcast over a channel-last
     grid (what made the knot path 1.3 to 2.2x slower than before issue 16).
 
+    Second derivatives (``create_graph=True``, a Hessian-vector product) go through
+    :meth:`_differentiable_backward`: the fast backward writes into buffers in place.
+
     Measured and not taken (tenth session): a channel-last layout, ``X = Pw (B_v^T kron I_D)``
     and ``H`` contiguous ``(R, S, D)``, so that the backward reads the loss's gradient
     without a transposed access: exact, but the 64-surface batch forward + backward on the
@@ -580,8 +583,9 @@ class _SurfaceGrid(torch.autograd.Function):
         return out.transpose(-1, -2)
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
     def backward(ctx, G):
+        if torch.is_grad_enabled():  # create_graph=True: second derivatives need a differentiable backward
+            return _SurfaceGrid._differentiable_backward(ctx, G)
         cp, w, Bu, BvT, out, den, X, Pw = ctx.saved_tensors
         R, n_u, S, dim = Bu.shape[0], Bu.shape[1], BvT.shape[1], cp.shape[-1]
         lead = cp.shape[:-3]
@@ -614,6 +618,21 @@ class _SurfaceGrid(torch.autograd.Function):
         if Pw is not None:
             dBvT = Pw.view(-1, Pw.shape[-1]).t().mm(dX.view(-1, S))
         return dcp, dw, dBu, dBvT
+
+    @staticmethod
+    def _differentiable_backward(ctx, G):
+        """The backward as autograd of the plain forward (``H = B_u Pw B_v^T``, then the
+        division), with ``create_graph``: the fast backward writes into buffers in place,
+        which autograd cannot differentiate again. Only Hessian-vector products and the
+        like (``create_graph=True``) come here."""
+        cp, w, Bu, BvT = ctx.saved_tensors[:4]
+        inputs = [t for t, need in zip((cp, w, Bu, BvT), ctx.needs_input_grad) if need]
+        with torch.enable_grad():
+            Pw = torch.cat([cp * w.unsqueeze(-1), w.unsqueeze(-1)], dim=-1)  # ([Bt,] n_u, n_v, D)
+            H = torch.einsum("rn,...nmd,ms->...rsd", Bu, Pw, BvT)
+            out = H[..., :-1] / H[..., -1:]
+            found = iter(torch.autograd.grad(out, inputs, G, create_graph=True, allow_unused=True))
+        return tuple(next(found) if need else None for need in ctx.needs_input_grad)
 
 
 def _folded_products(Pw: Tensor, ops: Sequence[Tensor], sizes: Sequence[int], folded: bool) -> Tensor:
