@@ -407,6 +407,13 @@ def test_normals_at_a_pole_are_the_limit_normal():
     assert_close(grid[:, -1], expected, atol=1e-12)
     swapped = NURBSSurface(s.control_points.transpose(0, 1), (2, 2), None, s.weights.T)  # pole on u = 1
     assert_close(swapped.normals(pole.flip(-1)), -expected, atol=1e-12)  # S_u x S_v points inward there
+    # next to the pole (not on it) the test for a degenerate point fires too: the point's
+    # side of the domain gives the sign (it took the lower edge's, flipping the normal)
+    for gap in (1e-9, 1e-8, 1e-7):
+        near = torch.stack([u, torch.full_like(u, 1 - gap)], -1)
+        assert_close(s.normals(near), s.evaluate(near) / s.evaluate(near).norm(dim=-1, keepdim=True), atol=1e-6)
+        assert_close(swapped.normals(near.flip(-1)), -s.evaluate(near) / s.evaluate(near).norm(dim=-1, keepdim=True),
+                     atol=1e-6)
 
 
 # ---- knot operations and output on a batch ----------------------------------------------------

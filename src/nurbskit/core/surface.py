@@ -13,10 +13,12 @@ Tensor = torch.Tensor
 def limit_normals(Su: Tensor, Sv: Tensor, Suv: Tensor, at_u_max: Tensor, at_v_max: Tensor) -> Tensor:
     """``S_u x S_v``, replaced by its limit from inside the domain where it vanishes.
 
-    Shapes: ``(..., 3)`` derivatives and ``(...)`` booleans (is the point on the upper edge
-    of the domain in u / in v) -> ``(..., 3)``, not normalised. Where ``S_u`` vanishes
+    Shapes: ``(..., 3)`` derivatives and ``(...)`` booleans (does the point lie in the upper
+    half of the domain in u / in v) -> ``(..., 3)``, not normalised. Where ``S_u`` vanishes
     along an edge ``v = v0`` (a pole), ``S_u(u, v) = (v - v0) S_uv + O((v - v0)^2)``, so the
-    normal points along ``sign(v - v0) S_uv x S_v``: ``-`` on ``v = v_max``, ``+`` elsewhere;
+    normal points along ``sign(v - v0) S_uv x S_v``: ``-`` near ``v = v_max`` (in the upper
+    half of the domain, so that the band next to the pole, which counts as degenerate
+    too, takes the pole's sign), ``+`` elsewhere;
     symmetrically ``sign(u - u0) S_u x S_uv`` where ``S_v`` vanishes. A point counts as
     degenerate when ``|S_u x S_v| <= sqrt(eps) (|S_u|^2 + |S_v|^2)``. Branch-free
     (``torch.where``): no host reads.
@@ -78,16 +80,18 @@ class NURBSSurface(TensorSpline):
         super().__init__(control_points, degrees, knot_vectors, weights, validate=validate)
 
     def _upper_edges(self, u: Tensor, v: Tensor, point_dims: int) -> tuple[Tensor, Tensor]:
-        """Whether ``u``, ``v`` sit on the upper domain ends: ``(*, ...)`` booleans on the device,
-        where the last ``point_dims`` axes of ``u`` and ``v`` index points and any before
-        them the batch."""
-        (ku, kv), (nu, nv) = self.knot_vectors, self.sizes
+        """Whether ``u``, ``v`` lie nearer the upper domain end than the lower one: ``(*, ...)``
+        booleans on the device, where the last ``point_dims`` axes of ``u`` and ``v`` index
+        points and any before them the batch. (A point counts as degenerate in a band next
+        to a pole, not only on it: the side of the domain it lies in picks the pole, and
+        with it the sign of the limit normal.)"""
+        (ku, kv), (nu, nv), (p, q) = self.knot_vectors, self.sizes, self.degrees
 
-        def end(k, n, x):
-            e = k.detach()[..., n]
-            return x >= e.reshape(e.shape + (1,) * point_dims)
+        def upper(k, lo, hi, x):
+            mid = (k.detach()[..., lo] + k.detach()[..., hi]) / 2
+            return x > mid.reshape(mid.shape + (1,) * point_dims)
 
-        return end(ku, nu, u), end(kv, nv, v)
+        return upper(ku, p, nu, u), upper(kv, q, nv, v)
 
     def _require_3d(self, op: str) -> None:
         if self.dim != 3:
