@@ -15,6 +15,8 @@ import torch
 from geomdl import helpers as gh
 from geomdl import operations as gops
 
+from _assert import assert_close
+
 from nurbskit.core import NURBSCurve, NURBSSurface, NURBSVolume, from_geomdl, to_geomdl
 from nurbskit.core.ops import decompose_bezier, elevate_degree, insert_knot, refine_knots, reverse, split
 from nurbskit.errors import NurbskitError
@@ -365,6 +367,24 @@ def assert_pieces_cover(obj, axis, pieces, rng):
     for piece in pieces:
         assert type(piece) is type(obj)
         assert_same_geometry(piece, obj, random_params(rng, piece, 40))
+
+
+def test_decompose_bezier_cuts_at_a_break():
+    # an interior knot of multiplicity p + 1 (a break: two control points there) is accepted
+    # at construction and by split; decompose_bezier refused it
+    rng = np.random.default_rng(77)
+    knots = torch.tensor([0, 0, 0, 0, 0.2, 0.4, 0.4, 0.4, 0.4, 0.7, 1, 1, 1, 1], dtype=torch.float64)
+    c = NURBSCurve(torch.tensor(rng.normal(size=(10, 3))), 3, knots, torch.tensor(rng.uniform(0.5, 2, 10)))
+    pieces = decompose_bezier(c)
+    assert [piece.domain[0] for piece in pieces] == [(0.0, 0.2), (0.2, 0.4), (0.4, 0.7), (0.7, 1.0)]
+    assert all(piece.sizes == (4,) for piece in pieces)
+    for piece in pieces:  # inside each piece (at the break the curve has two points, one per side)
+        (a, b), = piece.domain
+        t = torch.tensor(rng.uniform(a, b, 40))
+        assert_close(piece.evaluate(t), c.evaluate(t), atol=1e-12)
+    # each side of the break ends at its own control point
+    assert_close(pieces[1].evaluate(torch.tensor([0.4], dtype=torch.float64)), c.control_points[4:5], atol=1e-12)
+    assert_close(pieces[2].evaluate(torch.tensor([0.4], dtype=torch.float64)), c.control_points[5:6], atol=1e-12)
 
 
 # ---- splitting, Bezier decomposition, reversal against geomdl ----------------------------

@@ -502,7 +502,11 @@ def decompose_bezier(obj: TensorSpline, axis: int = 0) -> list[TensorSpline]:
     axis = _check_axis(obj, axis, op)
     p = obj.degrees[axis]
     knots = _knots64(obj, axis)
-    _check_interior_multiplicity(obj, axis, knots, op)
+    a, b = obj.domain[axis]
+    inner, counts = np.unique(knots[(knots > a) & (knots < b)], return_counts=True)
+    if counts.size and counts.max() > p:  # a break (multiplicity p + 1): the pieces on each side apart
+        left, right = split(obj, float(inner[np.argmax(counts > p)]), axis)
+        return decompose_bezier(left, axis) + decompose_bezier(right, axis)
     T, knots = _clamp_matrix(knots, p, obj.domain[axis])
     breaks = np.unique(knots)
     T = _bezier_matrix(knots, p) @ T
