@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._budget import human_bytes as _human
 from ..errors import InputError, OptionError
 
 
@@ -203,14 +204,6 @@ def _available_memory() -> int:
         return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return 1 << 62
-
-
-def _human(n: float) -> str:
-    for unit in ("bytes", "KB", "MB", "GB", "TB"):
-        if n < 1024 or unit == "TB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} TB"  # pragma: no cover
 
 
 def check_fits(path: Path, nbytes: int, what: str) -> None:
