@@ -65,8 +65,12 @@ def _levels(K: Tensor, degree: int, u: Tensor) -> tuple[list[Tensor], list[Tenso
     for q in range(1, p + 1):
         R, L = right[..., :q], left[..., p - q :]
         den = R + L
-        temp = values[-1] / den
-        values.append(F.pad(R * temp, (0, 1)) + F.pad(L * temp, (1, 0)))
+        # (R N) / den, not R (N / den): at a domain end (or a knot of multiplicity p) one of
+        # R, L is 0 and the other is den, so the function that survives is x / x = 1
+        # exactly, where x (1 / x) can be 1 - 2^-53 (a surface's corner then missed its
+        # control point by an ulp)
+        N = values[-1]
+        values.append(F.pad(R * N / den, (0, 1)) + F.pad(L * N / den, (1, 0)))
         dens.append(den)
     return values, dens
 
