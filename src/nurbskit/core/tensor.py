@@ -72,6 +72,11 @@ class BasisCache:
     entry dies with its key tensor. Tensors that require gradients (or inference-mode
     tensors, which have no version counter) are never cached: the basis is then built
     afresh, differentiably. Bounded by ``max_entries`` and ``max_bytes``.
+
+    Writes that bypass the version counter are not seen: through ``.data``
+    (``knots.data[4] = 0.3``) or through a NumPy array sharing the tensor's memory
+    (``knots.numpy()[4] = 0.3``). After such a write call :meth:`clear` (or write through
+    the tensor itself, ``knots[4] = 0.3``, which bumps ``_version``).
     """
 
     def __init__(self, max_entries: int = 256, max_bytes: int = 512 << 20):
