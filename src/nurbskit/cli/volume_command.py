@@ -12,7 +12,6 @@ start from (``default``, or ``paper`` for the paper's setting exactly).
 
 from __future__ import annotations
 
-import json
 import sys
 
 from ._options import add_config_options, add_device_options, config_from_args, device_and_dtype
@@ -52,13 +51,11 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from .._fs import atomic_open, check_output_dir, output_directory
-    from ..core.serialize import save
-    from ..io import write_mesh
+    from .._fs import check_output_dir, output_directory
     from ..volume.config import check_fit_size, get_preset
     from ..volume.drawings import load_drawing
-    from ..volume.figure import write_comparison_png
     from ..volume.fit import fit_silhouettes
+    from ..volume.outputs import write_outputs
 
     # Every check before any work: the options, the memory they need, the output folder.
     check_format_options(args)  # --mesh-tolerance, with or without --format
@@ -95,15 +92,9 @@ def run(args) -> int:
     report["preset"] = args.preset
     report["inputs"] = {"front": str(args.front), "left": str(args.left), "top": str(args.top)}
     with output_directory(args.out, args.overwrite, inputs=[args.front, args.left, args.top]) as tmp:
-        write_mesh(tmp / "mesh.obj", result.mesh.vertices, result.mesh.faces)
-        write_mesh(tmp / "mesh.ply", result.mesh.vertices, result.mesh.faces)
+        write_outputs(result, tmp, report)
         if not result.mesh.is_empty:
             write_requested_format(args, result.mesh, tmp, "mesh")
-        save(result.volume, tmp / "volume.json")
-        write_comparison_png(tmp / "views.png", result.drawings, result.projections, result.iou)
-        with atomic_open(tmp / "report.json", "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=2)
-            fh.write("\n")
     if result.mesh.is_empty:
         sys.stderr.write(f"nurbskit volume: warning: {result.message}; wrote an empty mesh to {args.out}\n")
         return 1
