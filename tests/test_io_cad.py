@@ -516,6 +516,31 @@ def test_a_truncated_step_file_is_refused_not_read_in_part(tmp_path):
     assert len(cad.read_cad(tmp_path / "set.step").faces) == len(surfaces)
 
 
+@pytest.mark.parametrize("ext", [".step", ".iges", ".brep"])
+def test_trims_of_a_large_patch_read_back_as_written(tmp_path, ext):
+    # The loops' 3-D curves approximate the trims within each edge's tolerance; STEP holds
+    # one uncertainty per file, and at OCC's default (the average tolerance) its reader
+    # re-derived the pcurves of the looser edges from the 3-D curves: a patch of 874 mm
+    # read back with loops of 92 and 79 points for 64 and 32, moved by 0.14 mm.
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        random_surface(rng, (3, 3), ("clamped", "clamped"), rational=True, scale=1.0)
+    s = random_surface(rng, (3, 3), ("clamped", "clamped"), rational=True, scale=100.0)
+    (u0, u1), (v0, v1) = s.domain
+    c, r = np.array([(u0 + u1) / 2, (v0 + v1) / 2]), np.array([(u1 - u0) / 2, (v1 - v0) / 2])
+    th = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    loops = [TrimLoop.from_uv(c + 0.9 * r * np.c_[np.cos(th), np.sin(th)]),
+             TrimLoop(c + 0.3 * r * np.c_[np.cos(th[::2]), np.sin(th[::2])], "hole")]
+    cad.write_cad(TrimmedSurface(s, loops), tmp_path / f"patch{ext}")
+    back = cad.read_cad(tmp_path / f"patch{ext}").faces[0]
+    for written in loops:
+        (read,) = [loop for loop in back.loops if loop.kind == written.kind]
+        assert len(read.uv) == len(written.uv)
+        # the same points, possibly from another start
+        start = int(np.argmin(np.linalg.norm(read.uv - written.uv[0], axis=1)))
+        assert_close(torch.tensor(np.roll(read.uv, -start, 0)), torch.tensor(written.uv), atol=1e-9 * (u1 - u0))
+
+
 def test_closed_mesh_becomes_a_valid_solid_of_the_same_volume(tmp_path):
     import trimesh
     from OCP.BRepGProp import BRepGProp
