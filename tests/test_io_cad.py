@@ -554,6 +554,25 @@ def test_closed_mesh_becomes_a_valid_solid_of_the_same_volume(tmp_path):
     assert abs(props.Mass() - mesh.volume) <= 1e-9 * mesh.volume
 
 
+def test_a_mesh_of_two_pieces_becomes_two_solids(tmp_path):
+    # One shell holding two disconnected boxes failed the check ("not written"); each
+    # connected piece is now its own solid.
+    import trimesh
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    a = trimesh.creation.box((1.0, 2.0, 3.0))
+    b = trimesh.creation.box((2.0, 2.0, 2.0))
+    b.apply_translation((10.0, 0.0, 0.0))
+    both = trimesh.util.concatenate([a, b])
+    for ext in (".step", ".brep"):
+        report = cad.write_cad((np.asarray(both.vertices), np.asarray(both.faces)), tmp_path / f"two{ext}")
+        assert report["valid"] and report["solids"] == 2 and report["faces"] == 24
+        props = GProp_GProps()
+        BRepGProp.VolumeProperties_s(cad.read_shape(tmp_path / f"two{ext}"), props)
+        assert abs(props.Mass() - (a.volume + b.volume)) <= 1e-9 * (a.volume + b.volume)
+
+
 # ---- the check is built in ----------------------------------------------------------------
 
 def test_a_failing_check_is_an_error_and_leaves_no_file(tmp_path, monkeypatch):

@@ -679,7 +679,8 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     The mesh's vertices become shared ``TopoDS_Vertex`` objects and each undirected mesh
     edge one shared ``TopoDS_Edge``, so the faces are connected (no sewing needed). A
     closed, consistently oriented mesh (as ``nurbskit volume`` writes) gives a valid
-    solid; an open one gives a shell.
+    solid; an open one gives a shell. A mesh of several pieces (triangles connected
+    through shared vertices) gives a compound of one solid or shell per piece.
 
     Args:
         vertices: ``(V, 3)``.
@@ -704,6 +705,16 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     f = f[area2 > 0]  # degenerate triangles have no plane
     if len(f) == 0:
         raise OptionError("every triangle of the mesh has zero area; nothing to write")
+    pieces = _mesh_pieces(len(v), f)
+    if len(pieces) > 1:  # one shell is one connected piece: a solid per piece, in a compound
+        from OCP.TopoDS import TopoDS_Compound
+
+        builder = BRep_Builder()
+        compound = TopoDS_Compound()
+        builder.MakeCompound(compound)
+        for piece in pieces:
+            builder.Add(compound, mesh_solid(v, f[piece], tolerance))
+        return compound
     used = np.unique(f)
     occ_vertices = {int(i): BRepBuilderAPI_MakeVertex(gp_Pnt(*map(float, v[i]))).Vertex() for i in used}
     edges = {}
@@ -742,6 +753,17 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     if not BRepCheck_Analyzer(solid).IsValid():
         return shell
     return solid
+
+
+def _mesh_pieces(num_vertices: int, faces: np.ndarray) -> list[np.ndarray]:
+    """Indices of the triangles of each connected piece (through shared vertices), in order."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.repeat(np.arange(len(faces)), 3)
+    incidence = coo_matrix((np.ones(rows.size), (rows, faces.reshape(-1))), shape=(len(faces), num_vertices)).tocsr()
+    count, label = connected_components(incidence @ incidence.T, directed=False)
+    return [np.flatnonzero(label == k) for k in range(count)]
 
 
 def _is_mesh(obj) -> bool:
