@@ -363,7 +363,9 @@ def cad_info(path: str | os.PathLike) -> dict:
     """What ``nurbskit info`` says about a STEP / IGES / BREP file.
 
     Keys: ``file``, ``format``, ``kind`` ('cad'), ``num_faces``, counts of ``solids``,
-    ``shells``, ``edges``, ``valid`` (BRepCheck_Analyzer), ``surface_types`` (count per
+    ``shells``, ``edges``, ``valid`` (BRepCheck_Analyzer on the shape read with OCC's
+    default healing, as from any other program; ``write_shape`` checks its own files
+    without it), ``surface_types`` (count per
     type), ``bbox`` and ``faces``: one entry per face with ``type`` (as stored),
     ``degrees``, ``sizes`` (control grid of its B-spline form), ``rational``, ``domain``,
     ``loops`` (outer + holes) and ``reversed``.
@@ -398,7 +400,8 @@ def format_cad_info(info: dict, max_faces: int = 50) -> str:
              f"  faces       {info['num_faces']} ({', '.join(f'{n} {k}' for k, n in info['surface_types'].items())})",
              f"  topology    {info['solids']} solids, {info['shells']} shells, {info['edges']} edges"
              + (f", {info['num_curves']} free curves" if info["num_curves"] else ""),
-             f"  check       {'valid' if info['valid'] else 'INVALID'} (OpenCASCADE BRepCheck_Analyzer)"]
+             f"  check       {'valid' if info['valid'] else 'INVALID'} (OpenCASCADE BRepCheck_Analyzer, "
+             "after the healing OCC's reader applies to any file)"]
     if info.get("bbox"):
         lo, hi = info["bbox"]
         lines.append("  bbox min    " + " ".join(f"{x:.6g}" for x in lo))
