@@ -210,6 +210,80 @@ def _domain(spline, periodic) -> _Domain:
     return _Domain(torch.where(per, -inf, a), torch.where(per, inf, b), a, b - a, per)
 
 
+def _c0_breaks(spline, periodic) -> list[Tensor] | None:
+    """Per direction, the interior knots of multiplicity ``>= p`` (where the spline is only
+    C0 in its parameter: a polyline's vertices, a crease), as sorted tensors; None when
+    there are none. Shared knots and directions that do not wrap only (one host read)."""
+    if any(kv.ndim > 1 for kv in spline.knot_vectors):
+        return None
+    out, found = [], False
+    for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
+        k = kv.detach()
+        inner = k[p + 1 : n]  # the interior knots (the ends have their own multiplicity)
+        values, counts = torch.unique_consecutive(inner, return_counts=True)
+        b = values[(counts >= p) & (values > k[p]) & (values < k[n])]
+        if bool(periodic[a]) or b.numel() == 0:
+            b = b[:0]
+        found |= b.numel() > 0
+        out.append(b)
+    return out if found else None
+
+
+def _pieces(dom: _Domain, t: Tensor, breaks: list[Tensor]) -> _Domain:
+    """Per start ``t (M, k)``, the box of the smooth piece it lies in: between the C0 knots
+    ``breaks`` around it (a start on a knot lies in the piece above it), the upper bound one
+    ulp below its knot, so that Newton at that bound evaluates the piece's own span."""
+    M, k = t.shape
+    fields = [z.expand(M, k).clone() for z in dom]
+    lo, hi = fields[0], fields[1]
+    for a, b in enumerate(breaks):
+        if b.numel() == 0:
+            continue
+        i = torch.searchsorted(b, t[:, a].contiguous(), right=True)  # knots at or below t
+        below = b.index_select(0, (i - 1).clamp_min(0))
+        above = b.index_select(0, i.clamp_max(b.numel() - 1))
+        lo[:, a] = torch.where(i > 0, below, lo[:, a])
+        hi[:, a] = torch.where(i < b.numel(), torch.nextafter(above, torch.full_like(above, -math.inf)), hi[:, a])
+    return _Domain(*fields)
+
+
+def _across_c0_knots(refine, dom: _Domain, breaks: list[Tensor], rows: Tensor, starts: Tensor,
+                     targets: Tensor) -> tuple[Tensor, Tensor]:
+    """Projected Newton on a spline with C0 knots -> ``(rows, found)`` of every start made.
+
+    Across a C0 knot the squared distance has a kink, where Newton overshoots, halves its
+    step and stops short of the knot. So each start is refined within its smooth piece (the
+    knots are the edges of its box, where the active set holds a parameter); a result that
+    ends on such an edge starts again in the neighbouring piece, from the knot (twice, for a
+    corner of pieces). The caller keeps each point's closest result."""
+    all_rows, all_found = [rows], []
+    box = _pieces(dom, starts, breaks)
+    found = refine(starts, targets, box)
+    all_found.append(found)
+    for _ in range(2):
+        again = []
+        for a, b in enumerate(breaks):
+            if b.numel() == 0:
+                continue
+            at_lo = (found[:, a] <= box.lo[:, a]) & (box.lo[:, a] > dom.lo[..., a])
+            at_hi = (found[:, a] >= box.hi[:, a]) & (box.hi[:, a] < dom.hi[..., a])
+            for mask, value in ((at_lo, torch.nextafter(box.lo[:, a], torch.full_like(found[:, a], -math.inf))),
+                                (at_hi, torch.nextafter(box.hi[:, a], torch.full_like(found[:, a], math.inf)))):
+                pick = torch.nonzero(mask).reshape(-1)  # a host read, on splines with C0 knots only
+                if pick.numel():
+                    t = found.index_select(0, pick).clone()
+                    t[:, a] = value.index_select(0, pick)
+                    again.append((rows.index_select(0, pick), t, targets.index_select(0, pick)))
+        if not again:
+            break
+        rows, starts, targets = (torch.cat(z) for z in zip(*again))
+        box = _pieces(dom, starts, breaks)
+        found = refine(starts, targets, box)
+        all_rows.append(rows)
+        all_found.append(found)
+    return torch.cat(all_rows), torch.cat(all_found)
+
+
 @torch.no_grad()
 def _newton(
     spline, Pw: Tensor, t: Tensor, x: Tensor, dom: _Domain, iterations: int, tol_move: Tensor, noise: Tensor,
@@ -525,6 +599,13 @@ def project_points(
 ) -> Projection:
     """Closest points on a NURBS surface (or curve) to many points, differentiably.
 
+    Where a spline is only C0 in its parameter (interior knots of multiplicity ``>= p`` in a
+    direction that does not wrap: a polyline's vertices, a crease), the squared distance
+    has a kink there, across which Newton would overshoot and stop short: a call that
+    starts from the grid refines within the smooth pieces (the C0 knots are edges of each
+    start's box) and starts again across the knot a result ends on. A warm call
+    (``params`` without ``restart``) does not, so that it reads nothing back.
+
     Args:
         spline: a :class:`NURBSSurface` (or :class:`NURBSCurve`; see
             :func:`project_points_curve`), possibly batched: control points
@@ -552,6 +633,7 @@ def project_points(
             grid (no grid is built).
         restart: with ``params``, also start from the grid and keep the closer result
             per point (a foot point can jump to another part of the surface).
+
         check_every: read one value back every this many iterations to stop once all
             points have converged; 0 runs all ``iterations`` and reads nothing.
         validate: check the points for NaN and infinity (one host read); loops that
@@ -707,13 +789,22 @@ def _project(
             def rows_of(z, i):  # a chunk of a per-start value; shared values pass through
                 return z if z is None or z.ndim == 0 else z[i : i + chunk]
 
-            pieces = [
-                _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk],
-                        dom if dom.lo.ndim < 2 else _Domain(*(z[i : i + chunk] for z in dom)), iterations,
-                        rows_of(tol_move, i), rows_of(noise, i), check_every, second_order, rows_of(element, i))
-                for i in range(0, starts_t.shape[0], chunk)
-            ]
-            found = torch.cat(pieces)
+            def refine(starts_t, targets, dom):
+                return torch.cat([
+                    _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk],
+                            dom if dom.lo.ndim < 2 else _Domain(*(z[i : i + chunk] for z in dom)), iterations,
+                            rows_of(tol_move, i), rows_of(noise, i), check_every, second_order, rows_of(element, i))
+                    for i in range(0, starts_t.shape[0], chunk)
+                ])
+
+            # C0 knots: found on the host, so only where the call reads anyway (a cold start
+            # from the grid); a warm call inside a loop reads nothing back
+            breaks = _c0_breaks(fixed, periodic) if elements is None and (warm is None or restart) else None
+            if breaks is None:
+                found = refine(starts_t, targets, dom)
+            else:  # Newton within the smooth pieces between C0 knots, then across the knots it ends on
+                rows, found = _across_c0_knots(refine, dom, breaks, rows, starts_t, targets)
+                targets = xd.index_select(0, rows)
             if rows.numel() > total:
                 # several starts for some points: keep the closest result, without a host read
                 C = _tp.derivatives_from_homogeneous(Pw, fixed.knot_vectors, fixed.degrees, found, 0, element)
