@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Sequence
 
+import numpy as np
 import torch
 
 from ..errors import NurbskitError
@@ -213,19 +214,17 @@ def _domain(spline, periodic) -> _Domain:
 def _c0_breaks(spline, periodic) -> list[Tensor] | None:
     """Per direction, the interior knots of multiplicity ``>= p`` (where the spline is only
     C0 in its parameter: a polyline's vertices, a crease), as sorted tensors; None when
-    there are none. Shared knots and directions that do not wrap only (one host read)."""
+    there are none. Shared knots and directions that do not wrap only. The knots are
+    read on the host (a copy per direction on an accelerator; nothing on the CPU)."""
     if any(kv.ndim > 1 for kv in spline.knot_vectors):
         return None
     out, found = [], False
     for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
-        k = kv.detach()
-        inner = k[p + 1 : n]  # the interior knots (the ends have their own multiplicity)
-        values, counts = torch.unique_consecutive(inner, return_counts=True)
-        b = values[(counts >= p) & (values > k[p]) & (values < k[n])]
-        if bool(periodic[a]) or b.numel() == 0:
-            b = b[:0]
-        found |= b.numel() > 0
-        out.append(b)
+        k = kv.detach().cpu().numpy()
+        values, counts = np.unique(k[p + 1 : n], return_counts=True)  # the interior knots
+        b = values[(counts >= p) & (values > k[p]) & (values < k[n])] if not periodic[a] else values[:0]
+        found |= b.size > 0
+        out.append(torch.as_tensor(b, dtype=kv.dtype, device=kv.device))
     return out if found else None
 
 
