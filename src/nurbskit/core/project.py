@@ -632,7 +632,6 @@ def project_points(
             grid (no grid is built).
         restart: with ``params``, also start from the grid and keep the closer result
             per point (a foot point can jump to another part of the surface).
-
         check_every: read one value back every this many iterations to stop once all
             points have converged; 0 runs all ``iterations`` and reads nothing.
         validate: check the points for NaN and infinity (one host read); loops that
