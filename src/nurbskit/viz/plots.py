@@ -82,15 +82,19 @@ def plot_clouds(points, output, control_points, path: str | os.PathLike, title: 
     x, y, c = _subsample(_np(points)), _subsample(_np(output).reshape(-1, 3)), _np(control_points)
     fig = _figure((12, 6))
     for k, (elev, azim) in enumerate(((25, -60), (25, 30))):
-        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
-        ax.scatter(x[:, 0], x[:, 1], x[:, 2], s=1, c="tab:blue", alpha=0.5, label="input")
-        ax.scatter(y[:, 0], y[:, 1], y[:, 2], s=1, c="tab:green", alpha=0.5, label="output")
-        ax.plot_wireframe(c[..., 0], c[..., 1], c[..., 2], color="tab:red", linewidth=0.6)
-        ax.scatter(c[..., 0].ravel(), c[..., 1].ravel(), c[..., 2].ravel(), s=6, c="tab:red", label="control net")
+        # drawn in call order (not sorted by depth), the input on top: a dense control net
+        # hid the input points and most of the output before
+        ax = fig.add_subplot(1, 2, k + 1, projection="3d", computed_zorder=False)
+        ax.plot_wireframe(c[..., 0], c[..., 1], c[..., 2], color="tab:red", linewidth=0.4, alpha=0.35, zorder=1)
+        ax.scatter(c[..., 0].ravel(), c[..., 1].ravel(), c[..., 2].ravel(), s=3, c="tab:red", alpha=0.5,
+                   label="control net", zorder=1)
+        ax.scatter(y[:, 0], y[:, 1], y[:, 2], s=1, c="tab:green", alpha=0.4, label="output", zorder=2)
+        ax.scatter(x[:, 0], x[:, 1], x[:, 2], s=1.5, c="tab:blue", alpha=0.6, label="input", zorder=3)
         _equal_axes(ax, np.vstack([x, c.reshape(-1, 3)]))
         ax.view_init(elev=elev, azim=azim)
         if k == 0:
-            ax.legend(loc="upper left", markerscale=4)
+            handles, labels = ax.get_legend_handles_labels()
+            ax.legend(handles[::-1], labels[::-1], loc="upper left", markerscale=4)  # as the title lists them
     fig.suptitle(title)
     return _save(fig, path)
 
@@ -117,29 +121,36 @@ def plot_loss(history: Sequence[dict], path: str | os.PathLike, alternation: Seq
 
     ``history`` records carry ``stage`` and ``loss`` (see :func:`nurbskit.fit.run_stage`);
     ``alternation`` (mean squared distances of the projection + least-squares rounds)
-    is drawn first when given.
+    is drawn first when given, on its own axis (left): the stages' losses (right) are
+    other quantities, and on one axis the curve seemed to jump up at the stage change.
+    A dashed line marks where each stage starts.
     """
     fig = _figure((7, 4))
     ax = fig.subplots()
     offset = 0
+    lines = []
     if len(alternation):
-        ax.semilogy(np.arange(len(alternation)), alternation, "k.-", label="alternation (mean sq. distance)")
+        lines += ax.semilogy(np.arange(len(alternation)), alternation, "k.-", label="alternation (mean sq. distance)")
+        ax.set_ylabel("alternation: mean squared distance")
         offset = len(alternation)
     stages: dict[str, list] = {}
     for k, rec in enumerate(history):
         stages.setdefault(rec["stage"], []).append((offset + k, rec["loss"]))
+    axs = ax.twinx() if len(alternation) and stages else ax
     for name, xy in stages.items():
         a = np.asarray(xy, dtype=float)
-        pos = a[:, 1] > 0
-        if pos.all():
-            ax.semilogy(a[:, 0], a[:, 1], label=name)
+        color = f"C{len(lines) % 10}"
+        if (a[:, 1] > 0).all():
+            lines += axs.semilogy(a[:, 0], a[:, 1], color=color, label=f"{name} (its loss)")
         else:
-            ax.plot(a[:, 0], a[:, 1], label=name)
+            lines += axs.plot(a[:, 0], a[:, 1], color=color, label=f"{name} (its loss)")
+        ax.axvline(a[0, 0] - 0.5, color="0.5", linestyle="--", linewidth=0.8)
     ax.set_xlabel("iteration")
-    ax.set_ylabel("loss (fit units: unit bounding-box diagonal)")
+    if stages:
+        axs.set_ylabel("stage loss (fit units: unit bounding-box diagonal)")
     ax.set_title(title)
-    if stages or len(alternation):
-        ax.legend()
+    if lines:
+        ax.legend(lines, [line.get_label() for line in lines], loc="upper right")
     ax.grid(True, which="both", alpha=0.3)
     return _save(fig, path)
 
