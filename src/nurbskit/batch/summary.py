@@ -167,7 +167,6 @@ def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = 
         if labels:
             ax.bar(list(labels), list(labels.values()), color="tab:blue", edgecolor="white")
             ax.set_xlabel(name)
-            ax.set_ylabel("inputs")
             continue
         values = [float(v) for v in raw]
         values = [v for v in values if math.isfinite(v)]
@@ -181,8 +180,13 @@ def plot_summary(records: Sequence[dict], path: str | os.PathLike, title: str = 
         else:
             ax.text(0.5, 0.5, "no values", ha="center", va="center", transform=ax.transAxes)
         ax.set_xlabel(name)
-        ax.set_ylabel("inputs")
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in axes:  # counts of inputs: whole numbers
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    axes[0].set_ylabel("inputs")  # one label for the row: beside every panel it ran into its neighbour
     failed = len(records) - len(ok)
     fig.suptitle(f"{title}: {len(ok)} ok, {failed} failed".strip(": "))
+    fig.tight_layout()
     return _save(fig, path)
 

@@ -106,10 +106,12 @@ def _plot_profile(fit, path: Path) -> None:
     cp = c.control_points.numpy()
     ax.plot(cp[:, 0], cp[:, 1], "o--", c="tab:red", ms=3, lw=0.6, label="control polygon")
     ax.set_aspect("equal")
+    if fit.kind == "revolution":  # from the axis: the half-silhouette of the part, not a sliver
+        ax.set_xlim(left=0.0)
     labels = ("r (distance to axis)", "z (height)") if fit.kind == "revolution" else ("x", "y")
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
-    ax.legend(loc="best")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # beside, not over the profile
     ax.set_title(f"{fit.kind} profile")
     _save(fig, path)
 
