@@ -16,9 +16,9 @@ checks, in :meth:`TensorSpline.evaluate`, :meth:`~TensorSpline.derivatives` and
 :meth:`~TensorSpline.evaluate_grid`, that parameters lie in the knot domain, and raises
 an error naming the parameter, its value and the domain unless ``extrapolate=True``.
 That check reads one boolean back to the host per call (one for all the axes of
-:meth:`~TensorSpline.evaluate_grid`), which on a GPU waits for the device; objects built with ``validate=False`` (as a fitting loop builds them; what an
-object derives, a batch element or a knot operation's result, keeps its setting) skip
-it, and then evaluation,
+:meth:`~TensorSpline.evaluate_grid`), which on a GPU waits for the device. Objects built
+with ``validate=False`` (as a fitting loop builds them; what an object derives, a batch
+element or a knot operation's result, keeps its setting) skip it, and then evaluation,
 derivatives and sampling read nothing back to the host at all. :meth:`~TensorSpline.sample`
 never checks: its grid lies in the domain by construction.
 """
