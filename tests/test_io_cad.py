@@ -468,6 +468,9 @@ def test_the_index_that_nurbskit_patches_writes_exports_its_faces(tmp_path):
     (tmp_path / "patches.json").write_text(json.dumps({"patches": [{"files": ["../outside.json"]}]}))
     with pytest.raises(NurbskitError, match="lies outside"):
         cad.read_objects(tmp_path / "patches.json")
+    (tmp_path / "patches.json").write_text(json.dumps({"patches": [{"files": ["patches.json"]}]}))
+    with pytest.raises(NurbskitError, match="expected a nurbskit JSON object"):  # not followed again
+        cad.read_objects(tmp_path / "patches.json")
 
 
 def test_a_batch_exports_one_face_per_element(tmp_path):

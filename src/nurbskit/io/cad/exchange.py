@@ -459,11 +459,11 @@ def _indexed_files(index: Path, files: list, where: str) -> list:
             raise InputError(f"{where}[files][{j}]: {name!r} lies outside {index.parent}")
         if not target.is_file():
             raise InputError(f"{where}[files][{j}]: {index.parent / name} does not exist")
-        out.extend(_read_json_objects(target))
+        out.extend(_read_json_objects(target, follow_index=False))  # an index of indexes is not followed
     return out
 
 
-def _read_json_objects(path: Path) -> list:
+def _read_json_objects(path: Path, follow_index: bool = True) -> list:
     from ...core.serialize import from_dict
     from .._json import load_json
 
@@ -485,7 +485,8 @@ def _read_json_objects(path: Path) -> list:
             out = []
             for i, item in enumerate(data[key]):
                 where = f"{path}[{key}][{i}]"
-                if isinstance(item, dict) and "format" not in item and isinstance(item.get("files"), list):
+                if (follow_index and isinstance(item, dict) and "format" not in item
+                        and isinstance(item.get("files"), list)):
                     out.extend(_indexed_files(path, item["files"], where))  # `nurbskit patches`' index
                     continue
                 if isinstance(item, dict) and isinstance(item.get("surface"), dict):  # {"surface": {...}, "trim": [...]}
