@@ -679,8 +679,8 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     The mesh's vertices become shared ``TopoDS_Vertex`` objects and each undirected mesh
     edge one shared ``TopoDS_Edge``, so the faces are connected (no sewing needed). A
     closed, consistently oriented mesh (as ``nurbskit volume`` writes) gives a valid
-    solid; an open one gives a shell. A mesh of several pieces (triangles connected
-    through shared vertices) gives a compound of one solid or shell per piece.
+    solid; an open one gives a shell. A mesh of several closed pieces (triangles connected
+    through shared vertices) gives a compound of one solid per piece.
 
     Args:
         vertices: ``(V, 3)``.
@@ -706,7 +706,9 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     if len(f) == 0:
         raise OptionError("every triangle of the mesh has zero area; nothing to write")
     pieces = _mesh_pieces(len(v), f)
-    if len(pieces) > 1:  # one shell is one connected piece: a solid per piece, in a compound
+    if 1 < len(pieces) and all(_closed(f[piece]) for piece in pieces):
+        # closed pieces apart (two boxes): a solid per piece, in a compound (one shell of
+        # them failed the check); open meshes and triangle soups stay one shell
         from OCP.TopoDS import TopoDS_Compound
 
         builder = BRep_Builder()
@@ -740,10 +742,7 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
         plane = gp_Pln(gp_Pnt(*map(float, v[a])), gp_Dir(*normal))
         face = BRepBuilderAPI_MakeFace(plane, wire, True).Face()
         builder.Add(shell, face)
-    # a closed mesh: every edge in exactly two triangles
-    undirected = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(undirected, axis=0, return_counts=True)
-    closed = bool(np.all(counts == 2))
+    closed = _closed(f)
     shell.Closed(closed)
     if not closed:
         return shell
@@ -755,6 +754,13 @@ def mesh_solid(vertices, faces, tolerance: float = TOLERANCE):
     return solid
 
 
+def _closed(faces: np.ndarray) -> bool:
+    """A closed mesh: every edge in exactly two triangles."""
+    undirected = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(undirected, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
+
+
 def _mesh_pieces(num_vertices: int, faces: np.ndarray) -> list[np.ndarray]:
     """Indices of the triangles of each connected piece (through shared vertices), in order."""
     from scipy.sparse import coo_matrix
@@ -763,7 +769,8 @@ def _mesh_pieces(num_vertices: int, faces: np.ndarray) -> list[np.ndarray]:
     rows = np.repeat(np.arange(len(faces)), 3)
     incidence = coo_matrix((np.ones(rows.size), (rows, faces.reshape(-1))), shape=(len(faces), num_vertices)).tocsr()
     count, label = connected_components(incidence @ incidence.T, directed=False)
-    return [np.flatnonzero(label == k) for k in range(count)]
+    order = np.argsort(label, kind="stable")
+    return np.split(order, np.cumsum(np.bincount(label, minlength=count))[:-1])
 
 
 def _is_mesh(obj) -> bool:
