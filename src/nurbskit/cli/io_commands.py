@@ -213,23 +213,24 @@ def _inputs(args, src) -> list:
     return found
 
 
-def _one_untrimmed_object(src: Path, out: Path) -> None:
-    """``convert`` writes one NURBS object: a CAD file of several faces or curves, or of a
-    trimmed face, is refused (read as its first face, untrimmed, it would lose the rest)."""
+def _one_untrimmed_object(src: Path, out: Path):
+    """The one NURBS object of a CAD file (STEP, IGES, BREP, .3dm), which ``convert``
+    writes; a file of several faces or curves, or of a trimmed face, is refused (read as
+    its first face, untrimmed, it would lose the rest)."""
     from ..io.cad import read_objects
 
     found = read_objects(src)
-    trimmed = sum(1 for o in found if getattr(o, "loops", None))
-    if len(found) > 1 or trimmed:
+    if len(found) > 1 or getattr(found[0], "loops", None):
         what = f"{len(found)} faces and curves" if len(found) > 1 else "a trimmed face"
         raise OptionError(f"{src}: holds {what}; convert writes one untrimmed NURBS object: "
                           f"`nurbskit export {src} {out.with_suffix('.json')}` keeps every face with its trim")
+    return found[0]  # float64, as read_nurbs returns it
 
 
 def run_convert(args) -> int:
     from ..io import formats
     from ..io.mesh import write_mesh
-    from ..io.nurbs import is_nurbs_file, read_nurbs, write_nurbs
+    from ..io.nurbs import _no_options, is_nurbs_file, read_nurbs, write_nurbs
     from ..io.points import write_points
 
     from ..io._base import check_not_input
@@ -253,8 +254,10 @@ def run_convert(args) -> int:
     with _progress(2, "convert") as bar:
         if is_nurbs_file(src):
             if src.suffix.lower() in (".step", ".stp", ".iges", ".igs", ".brep", ".3dm"):
-                _one_untrimmed_object(src, out)
-            obj = read_nurbs(src, **_nurbs_kwargs(args))
+                _no_options(src, _nurbs_kwargs(args))
+                obj = _one_untrimmed_object(src, out)  # the file read once
+            else:
+                obj = read_nurbs(src, **_nurbs_kwargs(args))
             bar.update(1)
             if out_ext not in (".json", ".ctrlpts", ".cptw", ".smesh", ".dat", ".3dm"):
                 raise OptionError(

@@ -68,12 +68,16 @@ def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
     """The ``index``-th NURBS curve or surface of a ``.3dm`` file (meshes, points and other
     objects are skipped; a Brep counts when it is one untrimmed surface, and any other Brep
     is refused)."""
-    rh = _rhino()
     path = Path(path)
     found = _read_model(path)
     if not -len(found) <= index < len(found):
         raise OptionError(f"{path}: index {index} is out of range; the file holds {len(found)} curves/surfaces")
-    geo = found[index]
+    return _spline_of(found[index])
+
+
+def _spline_of(geo) -> TensorSpline:
+    """The nurbskit curve or surface of an openNURBS ``NurbsCurve`` / ``NurbsSurface``."""
+    rh = _rhino()
     t = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
     if isinstance(geo, rh.NurbsCurve):
         n = len(geo.Points)
@@ -151,8 +155,7 @@ def _geometry(path: Path, obj: TensorSpline):
 
 def read_3dm_all(path: str | os.PathLike) -> list[TensorSpline]:
     """Every NURBS curve and surface of a ``.3dm`` file, in the file's order."""
-    path = Path(path)
-    return [read_3dm(path, index=i) for i in range(len(_read_model(path)))]
+    return [_spline_of(geo) for geo in _read_model(Path(path))]  # the file read once
 
 
 def write_3dm_objects(path: str | os.PathLike, objects) -> list[str]:
