@@ -141,6 +141,47 @@ def test_a_closed_fit_with_two_poles_exports_to_step(tmp_path):
         back = cad.read_cad(tmp_path / f"fit{ext}").faces[0].surface
         uv = grid(s, 11)
         assert_close(back.evaluate(uv), s.evaluate(uv), atol=1e-12 * diagonal(s))
+        # closed along v: one seam edge, used twice by the face, and the two poles; not a
+        # band slit open along v (two coincident boundary edges, 4 edges in all)
+        assert _seam_and_degenerate_edges(cad.read_shape(tmp_path / f"fit{ext}")) == (1, 2), ext
+
+
+def _seam_and_degenerate_edges(shape) -> tuple[int, int]:
+    from OCP.BRep import BRep_Tool
+
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as ShapeMap
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp
+    from OCP.TopoDS import TopoDS
+
+    face = next(shapes._faces(shape))
+    found = ShapeMap()  # each edge once, however often the face's wire uses it
+    TopExp.MapShapes_s(face, TopAbs_EDGE, found)
+    edges = [TopoDS.Edge(found.FindKey(i)) for i in range(1, found.Extent() + 1)]
+    return sum(BRep_Tool.IsClosed_s(e, face) for e in edges), sum(BRep_Tool.Degenerated_s(e) for e in edges)
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_the_fits_periodic_knots_are_written_periodic(dtype):
+    # the core's periodic knots (every closed fit's) wrap as OCC wraps them: bit for bit in
+    # float64, to float32's rounding in float32; (i - p) / s alone missed by an ulp, and a
+    # closed fit was written as an open band with two coincident edges
+    from nurbskit.fit.params import periodic_knots
+
+    k = periodic_knots(15, 3, dtype=dtype)
+    t = k.double().numpy()
+    exact = np.array_equal(t[:3], t[12:15] - 1.0) and np.array_equal(t[16:], t[4:7] + 1.0)  # as OCC, in float64
+    assert exact == (dtype == torch.float64)
+    assert (k[3], k[15]) == (0.0, 1.0) and torch.all(torch.diff(k) > 0)
+    cp = torch.as_tensor(np.random.default_rng(3).normal(size=(5, 12, 3)), dtype=dtype)
+    s = nurbskit.NURBSSurface(torch.cat([cp, cp[:, :3]], 1), (2, 3), [None, k])
+    assert occ.is_periodic(s, 1) and occ.surface_to_occ(s).IsVPeriodic()
+    back = occ.surface_from_occ(occ.surface_to_occ(s))
+    # OCC's wrapped knots replace a float32 spline's: a change within float32's rounding
+    tol = 1e-12 if dtype == torch.float64 else 8 * torch.finfo(dtype).eps
+    s = s.to(torch.float64)
+    uv = grid(s, 11)
+    assert_close(back.evaluate(uv), s.evaluate(uv), atol=tol * diagonal(s))
 
 
 def test_step_keeps_large_coordinates_to_the_last_bit(tmp_path):

@@ -31,15 +31,26 @@ def periodic_knots(n_ctrl: int, degree: int, *, dtype=None, device=None) -> Tens
     """Uniform unclamped knots whose domain ``[knots[p], knots[n]]`` is ``[0, 1]``.
 
     With the last ``degree`` control points equal to the first ``degree`` the curve is
-    closed with C^{degree-1} continuity at the seam.
+    closed with C^{degree-1} continuity at the seam. The ``degree`` knots beyond each end
+    of the domain are the knots one period (1) away, computed as OpenCASCADE computes a
+    periodic spline's (``t[i] = t[i + n - p] - 1``, ``t[n + 1 + j] = t[p + 1 + j] + 1``, in
+    the knots' dtype): ``(i - p) / s`` can differ from them in the last place, and
+    :mod:`nurbskit.io.cad` writes a spline as periodic (closed, with a seam edge) only when
+    its knots are periodic.
 
     Example:
         >>> periodic_knots(6, 2).tolist()
         [-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]
     """
-    n_spans = n_ctrl - degree
-    i = torch.arange(n_ctrl + degree + 1, dtype=dtype or torch.get_default_dtype(), device=device)
-    return (i - degree) / n_spans
+    p, n = degree, n_ctrl
+    s = n - p  # spans in the domain, and the shift between a knot and its periodic copy
+    inner = torch.arange(s + 1, dtype=dtype or torch.get_default_dtype(), device=device) / s
+    t = [None] * p + list(inner.unbind()) + [None] * p
+    for j in range(p):  # each wrapped knot from one already known (also when s < p)
+        t[n + 1 + j] = t[p + 1 + j] + 1.0
+    for i in reversed(range(p)):
+        t[i] = t[i + s] - 1.0
+    return torch.stack(t)
 
 
 def wrap_columns(free: Tensor, degree: int) -> Tensor:

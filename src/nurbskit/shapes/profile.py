@@ -176,17 +176,11 @@ def closing_matrix(n_ctrl: int, closed: bool, wrap: int = 1) -> Tensor:
 
 def periodic_profile_knots(n_ctrl: int, degree: int) -> Tensor:
     """The periodic knot vector of a closed profile: the core's uniform unclamped knots
-    (:func:`nurbskit.fit.params.periodic_knots`, domain [0, 1]), float64, with the ``degree``
-    knots beyond each end of the domain set to the inner knots shifted by one period, so
-    that they match OpenCASCADE's periodic knots to the bit (``(i - p) / s`` and
-    ``(i - p + s) / s - 1`` can differ in the last place; :mod:`nurbskit.io.cad` writes a
-    spline as periodic only when they agree exactly, else as the same geometry unclamped)."""
+    (:func:`nurbskit.fit.params.periodic_knots`, domain [0, 1], the wrapped knots as
+    OpenCASCADE computes them) in float64."""
     from ..fit.params import periodic_knots
 
-    k = periodic_knots(n_ctrl, degree, dtype=torch.float64)
-    p, n = degree, n_ctrl
-    period = k[n] - k[p]
-    return torch.cat([k[n - p : n] - period, k[p : n + 1], k[p + 1 : 2 * p + 1] + period])
+    return periodic_knots(n_ctrl, degree, dtype=torch.float64)
 
 
 def fit_curve_lsq(points, params, n_ctrl: int, degree: int = 3, *, knots: Tensor | None = None,

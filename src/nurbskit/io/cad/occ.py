@@ -10,7 +10,8 @@ Convention:
     spline is unwrapped with OCC's own ``SetNotPeriodic`` (which appends the first ``p``
     poles again and keeps the flat knots, checked in tests/test_io_cad.py). A nurbskit
     spline whose knots are periodic (the ``p`` knots at each end are the knots one period
-    ``T = t_n - t_p`` away, ``t[i] = t[i + n - p] - T``, exactly as OCC computes them) and
+    ``T = t_n - t_p`` away, ``t[i] = t[i + n - p] - T``, as OCC computes them, to a few
+    units in the last place of the spline's dtype) and
     whose last ``p`` control points and weights repeat the first ``p`` is written as a
     periodic OCC spline with ``periodic="auto"`` (the default); otherwise as the plain
     (unclamped) spline, which is the same geometry.
@@ -62,9 +63,15 @@ def knots_and_multiplicities(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return values, counts
 
 
-def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: np.ndarray, axis: int):
+def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: np.ndarray, axis: int,
+                   eps: float = 0.0):
     """For an unwrapped periodic spline along ``axis``: (distinct knots, multiplicities) of
-    OCC's periodic form, or None when the spline is not periodic."""
+    OCC's periodic form, or None when the spline is not periodic.
+
+    ``eps``: the machine epsilon of the spline's own dtype. The knots beyond the domain
+    may differ from the ones OCC derives by ``4 eps`` of the largest knot (the rounding of
+    ``(i - p) / s`` against ``(i - p + s) / s - 1``, or of a float32 spline's knots
+    wrapped in float64): OCC's replace them, a change below the spline's own precision."""
     n = points.shape[axis]
     p = degree
     m = n - p  # distinct poles
@@ -74,9 +81,12 @@ def _periodic_form(flat: np.ndarray, degree: int, points: np.ndarray, weights: n
     period = t[n] - t[p]
     if not period > 0:
         return None
-    # exactly the knots OCC derives for a periodic spline (each wrapped knot one period
-    # away, in floating point), so that the spline read back has the same flat knots
-    if not (np.array_equal(t[:p], t[m:m + p] - period) and np.array_equal(t[n + 1:], t[p + 1:2 * p + 1] + period)):
+    # the knots OCC derives for a periodic spline (each wrapped knot one period away, in
+    # floating point); bit-equal for the core's periodic_knots in float64, so that the
+    # spline read back has the same flat knots
+    tol = 4.0 * eps * float(np.abs(t).max())
+    if not (np.allclose(t[:p], t[m:m + p] - period, rtol=0, atol=tol)
+            and np.allclose(t[n + 1:], t[p + 1:2 * p + 1] + period, rtol=0, atol=tol)):
         return None
     take = lambda a, idx: np.take(a, idx, axis=axis)  # noqa: E731
     if not (np.array_equal(take(points, np.arange(m, n)), take(points, np.arange(p)))
@@ -96,7 +106,12 @@ def is_periodic(spline, axis: int = 0) -> bool:
     cp = spline.control_points.detach().cpu().double().numpy()
     w = spline.weights.detach().cpu().double().numpy()
     flat = spline.knot_vectors[axis].detach().cpu().double().numpy()
-    return _periodic_form(flat, spline.degrees[axis], cp, w, axis) is not None
+    return _periodic_form(flat, spline.degrees[axis], cp, w, axis, _eps(spline)) is not None
+
+
+def _eps(spline) -> float:
+    """The machine epsilon of a spline's dtype (how far its periodic knots may be from OCC's)."""
+    return float(torch.finfo(spline.control_points.dtype).eps)
 
 
 def _xyz(cp: np.ndarray) -> np.ndarray:
@@ -107,8 +122,8 @@ def _xyz(cp: np.ndarray) -> np.ndarray:
     raise OptionError(f"CAD files hold 2-D or 3-D geometry; got {cp.shape[-1]}-D control points")
 
 
-def _axis_form(flat, degree, cp, w, axis, periodic):
-    form = _periodic_form(flat, degree, cp, w, axis) if periodic in ("auto", True) else None
+def _axis_form(flat, degree, cp, w, axis, periodic, eps: float = 0.0):
+    form = _periodic_form(flat, degree, cp, w, axis, eps) if periodic in ("auto", True) else None
     if periodic is True and form is None:
         raise OptionError(f"periodic=True, but the knots or control points along axis {axis} are not periodic")
     if form is None:
@@ -131,7 +146,7 @@ def curve_to_occ(curve: NURBSCurve, periodic: bool | str = "auto"):
     w = curve.weights.detach().cpu().double().numpy()
     flat = curve.knot_vectors[0].detach().cpu().double().numpy()
     p = curve.degrees[0]
-    values, mult, closed, count = _axis_form(flat, p, cp, w, 0, periodic)
+    values, mult, closed, count = _axis_form(flat, p, cp, w, 0, periodic, _eps(curve))
     poles = Array1_gp_Pnt(1, count)
     set_pole = poles.SetValue
     for i, xyz in enumerate(cp[:count].tolist(), 1):
@@ -194,8 +209,9 @@ def surface_to_occ(surface: NURBSSurface, periodic: bool | str = "auto"):
     w = surface.weights.detach().cpu().double().numpy()
     (p, q) = surface.degrees
     fu, fv = (kv.detach().cpu().double().numpy() for kv in surface.knot_vectors)
-    uk, um, uper, nu = _axis_form(fu, p, cp, w, 0, periodic)
-    vk, vm, vper, nv = _axis_form(fv, q, cp, w, 1, periodic)
+    eps = _eps(surface)
+    uk, um, uper, nu = _axis_form(fu, p, cp, w, 0, periodic, eps)
+    vk, vm, vper, nv = _axis_form(fv, q, cp, w, 1, periodic, eps)
     poles = Array2_gp_Pnt(1, nu, 1, nv)
     set_pole = poles.SetValue
     for i, row in enumerate(cp[:nu, :nv].tolist(), 1):
