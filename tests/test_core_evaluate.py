@@ -180,3 +180,29 @@ def test_batched_parameters():
     assert out.shape == (3, 4, 3)
     assert_close(out.reshape(12, 3), s.evaluate(uv.reshape(12, 2)), atol=0)
     assert s.derivatives(uv, order=1).shape == (3, 4, 2, 2, 3)
+
+
+@pytest.mark.parametrize("weight", [1.0, 2.5])
+def test_derivatives_above_the_degree_are_exactly_zero_for_a_polynomial_spline(weight):
+    # The basis derivatives sum to zero only up to rounding: with the weights contracted as
+    # they are, a degree-7 curve's 8th derivative came out 0.07 (its 7th is 3e9) and a
+    # degree-3 surface's (4, 0) derivative 2e-11. Equal weights are no rational spline.
+    g = torch.Generator().manual_seed(0)
+    c = NURBSCurve(10 * torch.rand(12, 3, generator=g, dtype=torch.float64), 7,
+                   weights=torch.full((12,), weight, dtype=torch.float64))
+    t = torch.linspace(0, 1, 9, dtype=torch.float64)
+    d = c.derivatives(t, 8)
+    assert torch.equal(d[:, 8], torch.zeros_like(d[:, 8]))
+    assert torch.equal(c.evaluate_grid(t, order=8)[:, 8], torch.zeros_like(d[:, 8]))
+    for degrees in [(3, 3), (5, 2)]:
+        cp = 10 * torch.rand(2, 8, 7, 3, generator=g, dtype=torch.float64)  # a batch of two
+        s = NURBSSurface(cp, degrees, weights=torch.full((8, 7), weight, dtype=torch.float64))
+        o = max(degrees) + 1
+        uv = torch.rand(6, 2, generator=g, dtype=torch.float64)
+        ds = s.derivatives(uv, o)  # (2, 6, o + 1, o + 1, 3)
+        grid = s.evaluate_grid(uv[:, 0], uv[:, 1], order=o)  # (2, 6, 6, o + 1, o + 1, 3)
+        for table in (ds, grid):
+            above_u = table[..., degrees[0] + 1:, :, :]
+            above_v = table[..., :, degrees[1] + 1:, :]
+            assert torch.equal(above_u, torch.zeros_like(above_u))
+            assert torch.equal(above_v, torch.zeros_like(above_v))
