@@ -5,7 +5,7 @@ The single ``nurbskit export INPUT OUTPUT`` writes one file; a batch writes fold
 complete). So each item runs this module's ``export`` parser, which only the batch
 registers (it is no top-level command):
 
-    nurbskit batch export INPUTS... --out DIR -- --format step [--tolerance T] [--no-check]
+    nurbskit batch export INPUTS... --out DIR -- --format step [--tolerance T] [--no-check] [--units m]
 
 writes ``DIR/<name>/<input stem>.<format>`` and ``DIR/<name>/report.json`` (the report
 of :func:`~nurbskit.io.export.export_file`: ``format``, ``valid`` and the face counts of
@@ -20,6 +20,7 @@ import json
 import os
 from pathlib import Path
 
+from ..cli.export_command import UNIT_CHOICES, UNITS_HELP
 from ..errors import OptionError
 
 # nurbskit export's output formats (nurbskit.cli.export_command's --format choices)
@@ -43,6 +44,7 @@ def register(subparsers) -> None:
     p.add_argument("--tolerance", type=float, default=None,
                    help="mesh formats: tessellation tolerance in model units (default 1e-3 of the diagonal)")
     p.add_argument("--no-check", action="store_true", help="CAD files: do not read the file back and check it")
+    p.add_argument("--units", choices=UNIT_CHOICES, default="mm", help=UNITS_HELP)
     p.set_defaults(run=run_export_item)
 
 
@@ -57,7 +59,8 @@ def run_export_item(args) -> int:
     src = check_readable(args.input)
     name = f"{src.stem}.{args.format}"
     with output_directory(args.out, args.overwrite, inputs=[args.input]) as tmp:
-        report = export_file(src, tmp / name, format=args.format, tolerance=args.tolerance, check=not args.no_check)
+        report = export_file(src, tmp / name, format=args.format, tolerance=args.tolerance, check=not args.no_check,
+                             units=args.units)
         report.update(input=os.fspath(src), file=name, bytes=(tmp / name).stat().st_size)
         report["path"] = os.fspath(Path(args.out) / name)  # where it lies once the folder is in place
         with atomic_open(tmp / "report.json", "w", encoding="utf-8") as handle:

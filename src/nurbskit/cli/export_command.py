@@ -19,10 +19,13 @@ meshes (to CAD formats, as a triangulated solid), and the ``report.json`` (or fo
 profile (IGES 120 / 122, BREP likewise; ``--bspline``: the exact NURBS instead; other
 formats always get the NURBS). Outputs: by OUTPUT's extension or
 ``--format``. STEP, IGES and BREP need the ``[cad]`` extra (OpenCASCADE), ``.3dm`` too
-(rhino3dm).
+(rhino3dm). ``--units`` (default mm) is the unit of the coordinates: STEP, IGES and
+``.3dm`` outputs declare it (the numbers are written unchanged), STEP and IGES inputs are
+converted into it; BREP holds no unit.
 
 For the ``fit``, ``patches`` and ``volume`` commands: :func:`add_format_option` adds
-``--format`` and ``--mesh-tolerance``, and :func:`write_result` writes their result in that format.
+``--format``, ``--mesh-tolerance`` and ``--units``, and :func:`write_result` writes their
+result in that format.
 """
 
 from __future__ import annotations
@@ -33,6 +36,11 @@ from pathlib import Path
 from ._options import number_in
 
 FORMAT_CHOICES = ("step", "iges", "brep", "3dm", "obj", "ply", "stl", "gltf")
+#: the keys of :data:`nurbskit.io.cad.exchange.UNITS` (not imported from there: building the
+#: parser imports no I/O module)
+UNIT_CHOICES = ("mm", "cm", "m", "in", "ft", "um")
+UNITS_HELP = ("the length unit of the coordinates (default mm): STEP, IGES and .3dm files declare it, "
+              "the numbers written unchanged; STEP and IGES inputs are converted into it; BREP holds no unit")
 
 
 def register(subparsers) -> None:
@@ -49,6 +57,7 @@ def register(subparsers) -> None:
     p.add_argument("--tolerance", type=float, default=None, metavar="T",
                    help="tessellation: largest distance from a triangle to the surface, in model units "
                         "(default 1e-3 of the bounding-box diagonal)")
+    p.add_argument("--units", choices=UNIT_CHOICES, default="mm", help=UNITS_HELP)
     p.add_argument("--bspline", action="store_true",
                    help="a `nurbskit shape` report: write its exact NURBS, not the analytic surface of "
                         "revolution / extrusion")
@@ -58,14 +67,17 @@ def register(subparsers) -> None:
 
 
 def add_format_option(parser) -> None:
-    """``--format step|iges|brep|3dm|obj|ply|stl|gltf`` and ``--mesh-tolerance`` for a result command
-    (not ``--tolerance``: the fitting commands use that name for their stopping rule)."""
+    """``--format step|iges|brep|3dm|obj|ply|stl|gltf``, ``--mesh-tolerance`` and ``--units`` for a
+    result command (not ``--tolerance``: the fitting commands use that name for their stopping rule)."""
     parser.add_argument("--format", dest="export_format", choices=FORMAT_CHOICES, default=None,
                         help="also write the result in this format (CAD files are read back and checked)")
     parser.add_argument("--mesh-tolerance", dest="export_tolerance", type=number_in(0, low_open=True), default=None,
                         metavar="T",
                         help="with --format obj/ply/stl/gltf: tessellation tolerance in model units "
                              "(default 1e-3 of the bounding-box diagonal)")
+    parser.add_argument("--units", dest="export_units", choices=UNIT_CHOICES, default="mm",
+                        help="with --format step/iges/3dm: the length unit of the coordinates, which the file "
+                             "declares (default mm; the numbers are written unchanged)")
 
 
 def check_format_options(args) -> None:
@@ -83,7 +95,8 @@ def write_requested_format(args, obj, folder, stem: str) -> None:
     if args.export_format:
         name = f"{stem}.{args.export_format}"
         report = write_result(obj, Path(folder) / name, format=args.export_format,
-                              tolerance=args.export_tolerance, tolerance_option="--mesh-tolerance")
+                              tolerance=args.export_tolerance, tolerance_option="--mesh-tolerance",
+                              units=getattr(args, "export_units", "mm"))
         say_left_out(report, name, f"nurbskit {args.command}")
 
 
@@ -96,12 +109,14 @@ def say_left_out(report: dict, name, command: str) -> None:
 
 
 def write_result(obj, path, format: str | None = None, tolerance: float | None = None, *,
-                 tolerance_option: str = "--mesh-tolerance", **kwargs) -> dict:
+                 tolerance_option: str = "--mesh-tolerance", units: str = "mm", units_option: str = "--units",
+                 **kwargs) -> dict:
     """Write a result in any format (see :func:`nurbskit.io.cad.write_result`); messages about
-    ``tolerance`` name ``tolerance_option``."""
+    ``tolerance`` name ``tolerance_option``, about ``units`` ``units_option``."""
     from ..io.cad import write_result as _write
 
-    return _write(obj, path, format=format, tolerance=tolerance, tolerance_option=tolerance_option, **kwargs)
+    return _write(obj, path, format=format, tolerance=tolerance, tolerance_option=tolerance_option, units=units,
+                  units_option=units_option, **kwargs)
 
 
 def run_export(args) -> int:
@@ -109,7 +124,7 @@ def run_export(args) -> int:
 
     out = Path(args.output)
     report = export_file(args.input, out, format=args.format, tolerance=args.tolerance, check=not args.no_check,
-                         analytic=not args.bspline)
+                         analytic=not args.bspline, units=args.units)
     parts = [f"wrote {out} ({report['format']}"]
     if "faces" in report:
         faces = f"{report['faces']} face" + ("" if report["faces"] == 1 else "s")
@@ -121,4 +136,5 @@ def run_export(args) -> int:
     return 0
 
 
-__all__ = ["register", "run_export", "add_format_option", "check_format_options", "write_result", "FORMAT_CHOICES"]
+__all__ = ["register", "run_export", "add_format_option", "check_format_options", "write_result", "FORMAT_CHOICES",
+           "UNIT_CHOICES"]

@@ -22,9 +22,10 @@ MESH_INPUTS = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
 """Extensions read as triangle meshes (unless the file is a NURBS file of that extension)."""
 
 
-def read_exportable(path: str | os.PathLike) -> list:
+def read_exportable(path: str | os.PathLike, *, units: str = "mm") -> list:
     """The objects of ``path``: ``[mesh]`` for a triangle mesh, else the NURBS objects
-    (nurbskit JSON or a patch set, ``.3dm``, STEP, IGES, BREP, the other NURBS files)."""
+    (nurbskit JSON or a patch set, ``.3dm``, STEP, IGES, BREP, the other NURBS files).
+    STEP and IGES coordinates are converted into ``units``; the rest are read as they are."""
     from .cad import read_objects
     from .nurbs import is_nurbs_file
 
@@ -33,7 +34,7 @@ def read_exportable(path: str | os.PathLike) -> list:
         from .mesh import read_mesh
 
         return [read_mesh(path)]
-    return read_objects(path)
+    return read_objects(path, units=units)
 
 
 def _elements(obj) -> list:
@@ -75,7 +76,7 @@ def folder_input(folder: Path) -> Path:
 
 def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: str | None = None,
                 tolerance: float | None = None, check: bool = True, analytic: bool = True,
-                tolerance_option: str = "--tolerance") -> dict:
+                tolerance_option: str = "--tolerance", units: str = "mm", units_option: str = "--units") -> dict:
     """Read ``input`` and write it to ``output`` (format: ``format`` or the extension).
 
     Args:
@@ -88,6 +89,12 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
             STEP / IGES / BREP as a surface of revolution or extrusion over the exact
             B-spline profile; False writes the exact NURBS instead.
         tolerance_option: the name of ``tolerance`` in messages.
+        units: the length unit of the coordinates (``mm``, ``cm``, ``m``, ``in``, ``ft``,
+            ``um``; default ``mm``): a STEP or IGES input is converted into it from the unit
+            it declares, and STEP, IGES and ``.3dm`` outputs declare it (the numbers
+            written unchanged). BREP, JSON, meshes and the other inputs hold no unit (a
+            ``.3dm`` input's numbers are taken as they are).
+        units_option: the name of ``units`` in messages.
 
     Returns:
         The report of :func:`nurbskit.io.cad.write_result` (``format``, ``path``; for CAD
@@ -96,11 +103,11 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
 
     Raises:
         InputError: ``input`` is missing, empty or unreadable. OptionError: a bad
-        ``format``, ``tolerance`` or ``output`` name, or ``output`` is ``input``.
+        ``format``, ``tolerance``, ``units`` or ``output`` name, or ``output`` is ``input``.
     """
     from ._base import check_not_input, check_readable
     from .cad import write_result
-    from .cad.exchange import check_tolerance
+    from .cad.exchange import check_tolerance, check_units
 
     src = Path(input)
     if src.is_dir():
@@ -110,10 +117,12 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
         raise OptionError(f"{out}: is a directory, expected an output file name")
     check_not_input(out, [src])
     check_tolerance(tolerance, tolerance_option)
-    obj = [element for o in read_exportable(src) for element in _elements(o)]
+    check_units(units, units_option)
+    obj = [element for o in read_exportable(src, units=units) for element in _elements(o)]
     try:
         return write_result(obj, out, format=format, tolerance=tolerance, check=check,
-                            analytic=analytic, tolerance_option=tolerance_option)
+                            analytic=analytic, tolerance_option=tolerance_option, units=units,
+                            units_option=units_option)
     except (InputError, OptionError) as exc:  # what the geometry cannot be written as: name the file it came from
         if str(exc).startswith((str(src), str(out), "--")):
             raise

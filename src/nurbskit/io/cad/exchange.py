@@ -16,7 +16,10 @@ over 128, with 126 curves) and ``IGESData_IGESWriter`` prints 17 significant dig
 instead of OCC's 9 (``%11.9E``, which loses about 1e-8 of the diagonal, measured in
 tests/test_io_cad.py). BREP, OCC's own format, keeps every bit as it is.
 
-Units: nurbskit coordinates are written as they are and declared as millimetres.
+Units (:data:`UNITS`): ``units`` names the length unit nurbskit's coordinates are in
+(default ``"mm"``). STEP, IGES and ``.3dm`` files are written with the numbers as they are
+(bit for bit) and declare that unit; reading STEP and IGES converts from the unit the file
+declares into ``units`` (OCC's readers). BREP holds no unit: written and read as it is.
 """
 
 from __future__ import annotations
@@ -73,16 +76,46 @@ def cad_format(path: str | os.PathLike, format: str | None = None) -> str:
     return CAD_FORMATS[ext]
 
 
+# ---- units --------------------------------------------------------------------------------
+
+#: The length units nurbskit's coordinates can be in: nurbskit's name -> (OCC's STEP name,
+#: as the ``Interface_Static`` settings ``xstep.cascade.unit`` / ``write.step.unit`` take
+#: it; IGES name, as ``IGESControl_Writer`` takes it; millimetres per unit; rhino3dm's
+#: ``UnitSystem`` member).
+UNITS = {
+    "mm": ("MM", "MM", 1.0, "Millimeters"),
+    "cm": ("CM", "CM", 10.0, "Centimeters"),
+    "m": ("M", "M", 1000.0, "Meters"),
+    "in": ("INCH", "IN", 25.4, "Inches"),
+    "ft": ("FT", "FT", 304.8, "Feet"),
+    "um": ("UM", "UM", 0.001, "Microns"),
+}
+
+
+def check_units(units, option: str = "units") -> str:
+    """``units`` if it is a key of :data:`UNITS`, else an OptionError naming ``option`` and
+    the units allowed."""
+    if isinstance(units, str) and units in UNITS:
+        return units
+    raise OptionError(f"{option} must be one of {', '.join(UNITS)}, got {units!r}")
+
+
 # ---- writing ------------------------------------------------------------------------------
 
-def _write_step(shape, path: Path) -> None:
+def _write_step(shape, path: Path, units: str = "mm") -> None:
     from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.STEPControl import STEPControl_StepModelType, STEPControl_Writer
     from OCP.StepData import StepData_StepWriter
 
-    writer = STEPControl_Writer()
-    with _static_ints(STEP_WRITE_STATICS):
-        status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
+    name = UNITS[units][0]
+    # the shape's unit (xstep.cascade.unit) and the file's (write.step.unit) the same: the
+    # numbers are written unchanged and the file declares that unit (with write.step.unit
+    # alone OCC would scale from millimetres)
+    statics = {**STEP_WRITE_STATICS, "xstep.cascade.unit": name, "write.step.unit": name}
+    with _TRANSLATOR_LOCK:  # the settings are global to the process
+        writer = STEPControl_Writer()
+        with _statics(statics):
+            status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
     if status != IFSelect_ReturnStatus.IFSelect_RetDone:
         raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to STEP ({status})")
     model = writer.Model()
@@ -117,15 +150,23 @@ def _print_model(out, protocol, mid_range_format: str, path: Path, what: str) ->
             raise NurbskitError(f"{path}: OpenCASCADE could not write the {what} text")
 
 
-def _write_iges(shape, path: Path) -> None:
+def _write_iges(shape, path: Path, units: str = "mm") -> None:
     from OCP.IGESControl import IGESControl_Writer
     from OCP.IGESData import IGESData_IGESWriter
     from OCP.IGESSolid import IGESSolid
 
-    writer = IGESControl_Writer("MM", 0)  # 0: faces as trimmed surfaces (144), not B-rep entities
-    if not writer.AddShape(shape):
-        raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to IGES")
-    writer.ComputeModel()
+    _, name, mm_per_unit, _ = UNITS[units]
+    with _TRANSLATOR_LOCK:  # the writer reads the global xstep.cascade.unit when it is made
+        writer = IGESControl_Writer(name, 0)  # 0: faces as trimmed surfaces (144), not B-rep entities
+        # the shape is in the file's unit: the numbers are written unchanged (left to the
+        # global setting, OCC would scale them from millimetres)
+        model = writer.Model()
+        section = model.GlobalSection()
+        section.SetCascadeUnit(mm_per_unit)
+        model.SetGlobalSection(section)
+        if not writer.AddShape(shape):
+            raise NurbskitError(f"{path}: OpenCASCADE could not translate the shape to IGES")
+        writer.ComputeModel()
     # 17 significant digits instead of OCC's 9 ('%11.9E'); see the module docstring
     _print_model(IGESData_IGESWriter(writer.Model()), IGESSolid.Protocol_s(), MID_RANGE_FORMAT, path, "IGES")
 
@@ -137,8 +178,12 @@ def _write_brep(shape, path: Path) -> None:
         raise NurbskitError(f"{path}: OpenCASCADE could not write the BREP file")
 
 
-def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, check: bool = True) -> dict:
+def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, check: bool = True,
+                units: str = "mm") -> dict:
     """Write an OCC shape as STEP, IGES or BREP, atomically, then read it back and check it.
+
+    ``units``: the unit of the shape's coordinates (a key of :data:`UNITS`); STEP and IGES
+    files declare it, and the numbers are written unchanged. BREP holds no unit.
 
     Returns:
         The check report: ``format``, ``valid`` (``BRepCheck_Analyzer`` on the shape read
@@ -152,12 +197,16 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
     _quiet()
     path = Path(path)
     fmt = cad_format(path, format)
+    check_units(units)
     written = count_shapes(shape)
     with atomic_path(path) as tmp:
-        {"step": _write_step, "iges": _write_iges, "brep": _write_brep}[fmt](shape, tmp)
+        if fmt == "brep":
+            _write_brep(shape, tmp)
+        else:
+            (_write_step if fmt == "step" else _write_iges)(shape, tmp, units)
         report = {"format": fmt, "faces_written": written["faces"]}
         if check:
-            back = read_shape(tmp, format=fmt, heal=False)
+            back = read_shape(tmp, format=fmt, heal=False, units=units)
             found = check_shape(back)
             report.update(found)
             if not found["valid"]:
@@ -169,7 +218,7 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
 
 
 def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_tolerance: float | None = 1e-6,
-              check: bool = True, analytic: bool = True) -> dict:
+              check: bool = True, analytic: bool = True, units: str = "mm") -> dict:
     """Write nurbskit objects to a STEP (.step/.stp), IGES (.iges/.igs) or BREP (.brep) file.
 
     Args:
@@ -182,6 +231,8 @@ def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_to
             ``ExtrudedSurface`` as STEP's ``SURFACE_OF_REVOLUTION`` /
             ``SURFACE_OF_LINEAR_EXTRUSION`` (IGES 120 / 122; default), else as their
             exact NURBS.
+        units: the unit of the coordinates (``"mm"``, ``"cm"``, ``"m"``, ``"in"``, ``"ft"``,
+            ``"um"``): written unchanged, and STEP / IGES declare it (BREP holds no unit).
 
     Returns:
         The check report of :func:`write_shape`.
@@ -192,22 +243,31 @@ def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_to
         >>> write_cad(s, "patch.step")["valid"]  # doctest: +SKIP
         True
     """
+    check_units(units)
     shape = to_shape(obj, sew_tolerance=sew_tolerance, analytic=analytic)
-    return write_shape(shape, path, format=format, check=check)
+    return write_shape(shape, path, format=format, check=check, units=units)
 
 
 # ---- reading ------------------------------------------------------------------------------
 
-def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool = True):
+def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool = True, units: str = "mm"):
     """The OCC shape of a STEP, IGES or BREP file.
 
     ``heal``: let OCC's reader run its shape healing (``ShapeFix_Shape``, the default, as
     for any file from elsewhere); ``False`` reads the file as it is written, which is how
     :func:`write_shape` checks its own files (see :data:`CHECK_READ_FIXES`).
+    ``units``: the unit (a key of :data:`UNITS`) that STEP and IGES coordinates are
+    converted into from the unit the file declares; a BREP file is read as it is.
     """
+    return _read_shape(path, format, heal, units)[0]
+
+
+def _read_shape(path, format: str | None, heal: bool, units: str):
+    """:func:`read_shape`, and the length unit the file declares (None for BREP)."""
     _quiet()
     from .._base import check_readable
 
+    check_units(units)
     path = check_readable(path)
     fmt = cad_format(path, format)
     if fmt == "brep":
@@ -219,7 +279,7 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
         ok = BRepTools.Read_s(shape, str(path), BRep_Builder())
         if not ok or shape.IsNull():
             raise InputError(f"{path}: OpenCASCADE could not read it as a BREP file")
-        return shape
+        return shape, None
     from OCP.IFSelect import IFSelect_ReturnStatus
 
     if fmt == "step":
@@ -235,6 +295,7 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
         # what translates is part of the model, and it would pass for the whole
         raise InputError(f"{path}: the {fmt.upper()} file has load failures (unresolved references or damaged "
                          "entities: truncated or corrupt?); refusing to read part of it")
+    _convert_into(reader, fmt, units)
     with _TRANSLATOR_LOCK:
         transferred = _transfer(reader, fmt, heal)
     if transferred == 0:
@@ -242,7 +303,38 @@ def read_shape(path: str | os.PathLike, *, format: str | None = None, heal: bool
     shape = reader.OneShape()
     if shape.IsNull():
         raise InputError(f"{path}: the {fmt.upper()} file holds no shape")
-    return shape
+    return shape, _file_units(reader, fmt)
+
+
+def _convert_into(reader, fmt: str, units: str) -> None:
+    """Make ``reader`` (a file read, not yet transferred) convert the file's coordinates
+    from the unit it declares into ``units``."""
+    mm_per_unit = UNITS[units][2]
+    if fmt == "step":
+        reader.SetSystemLengthUnit(mm_per_unit)
+        return
+    # IGES's reader has no such call: it converts into the unit of its model's global
+    # section, taken from the global setting xstep.cascade.unit when the file was read
+    # (set around the transfer it changes nothing; measured)
+    model = reader.IGESModel()
+    section = model.GlobalSection()
+    section.SetCascadeUnit(mm_per_unit)
+    model.SetGlobalSection(section)
+
+
+def _file_units(reader, fmt: str) -> str | None:
+    """The length unit a STEP or IGES file declares, as the file names it (STEP:
+    ``METRE``, ``MILLIMETRE``, ``INCH``...; IGES: its global section's unit name, ``MM``,
+    ``M``, ``IN``...), or None when it names none."""
+    if fmt == "step":
+        from OCP.collections import Sequence_TCollection_AsciiString as Names
+
+        length, angle, solid_angle = Names(), Names(), Names()
+        reader.FileUnits(length, angle, solid_angle)
+        names = sorted({length.Value(i).ToCString() for i in range(1, length.Length() + 1)})
+        return ", ".join(names) or None
+    name = reader.IGESModel().GlobalSection().UnitName()
+    return name.ToCString() if name is not None and not name.IsEmpty() else None
 
 
 #: OCC's translator settings are global to a process (the shape-fix parameters of a
@@ -263,7 +355,7 @@ def _transfer(reader, fmt: str, heal: bool) -> int:
     saved.Assign(reader.GetShapeFixParameters())
     reader.SetShapeFixParameters(_check_fix_parameters(fmt))
     try:
-        with _static_ints(CHECK_READ_STATICS[fmt]):
+        with _statics(CHECK_READ_STATICS[fmt]):
             return reader.TransferRoots()
     finally:
         reader.SetShapeFixParameters(saved)
@@ -325,9 +417,10 @@ def _check_fix_parameters(fmt: str):
     return parameters
 
 
-class _static_ints:
-    """Set OCC's global translator settings (``Interface_Static``) for one transfer and
-    put the previous values back afterwards."""
+class _statics:
+    """Set OCC's global translator settings (``Interface_Static``: ints with ``SetIVal``,
+    strings, such as an enumeration's value name, with ``SetCVal``) for one transfer and put
+    the previous values back afterwards. Callers hold :data:`_TRANSLATOR_LOCK`."""
 
     def __init__(self, values: dict):
         self.values, self.saved = values, {}
@@ -336,23 +429,39 @@ class _static_ints:
         from OCP.Interface import Interface_Static
 
         for name, value in self.values.items():
-            self.saved[name] = Interface_Static.IVal_s(name)
-            Interface_Static.SetIVal_s(name, value)
+            if isinstance(value, str):
+                saved, ok = Interface_Static.CVal_s(name), Interface_Static.SetCVal_s(name, value)
+            else:
+                saved, ok = Interface_Static.IVal_s(name), Interface_Static.SetIVal_s(name, value)
+            if not ok:
+                self.__exit__()
+                raise NurbskitError(f"OpenCASCADE refused its setting {name} = {value!r}")
+            self.saved[name] = saved
+        return self
 
     def __exit__(self, *exc):
         from OCP.Interface import Interface_Static
 
-        for name, value in self.saved.items():
-            Interface_Static.SetIVal_s(name, value)
+        for name, value in reversed(self.saved.items()):
+            if isinstance(value, str):
+                Interface_Static.SetCVal_s(name, value)
+            else:
+                Interface_Static.SetIVal_s(name, value)
+        self.saved = {}
         return False
 
 
-def read_cad(path: str | os.PathLike, *, format: str | None = None, dtype=torch.float64) -> CadModel:
+def read_cad(path: str | os.PathLike, *, format: str | None = None, dtype=torch.float64,
+             units: str = "mm") -> CadModel:
     """The faces (as TrimmedSurface: every face, analytic ones converted to B-splines by
-    OCC, trimming as UV polylines) and free curves of a STEP, IGES or BREP file."""
+    OCC, trimming as UV polylines) and free curves of a STEP, IGES or BREP file.
+
+    ``units``: STEP and IGES coordinates are converted from the unit the file declares into
+    this one (a key of :data:`UNITS`; default millimetres); BREP holds no unit."""
     path = Path(path)
+    check_units(units)
     try:
-        return shape_to_model(read_shape(path, format=format), dtype=dtype)
+        return shape_to_model(read_shape(path, format=format, units=units), dtype=dtype)
     except NurbskitError as exc:
         if str(exc).startswith(str(path)):
             raise
@@ -368,10 +477,12 @@ def cad_info(path: str | os.PathLike) -> dict:
     without it), ``surface_types`` (count per
     type), ``bbox`` and ``faces``: one entry per face with ``type`` (as stored),
     ``degrees``, ``sizes`` (control grid of its B-spline form), ``rational``, ``domain``,
-    ``loops`` (outer + holes) and ``reversed``.
+    ``loops`` (outer + holes) and ``reversed``; ``units``: the length unit the file
+    declares, as it names it (None for BREP, which has none; the numbers here are in
+    millimetres, into which OCC's reader converts STEP and IGES).
     """
     path = Path(path)
-    shape = read_shape(path)
+    shape, declared = _read_shape(path, None, True, "mm")
     model = shape_to_model(shape)
     counts = check_shape(shape)
     faces, types = [], {}
@@ -387,7 +498,7 @@ def cad_info(path: str | os.PathLike) -> dict:
     return {
         "file": str(path), "format": cad_format(path), "kind": "cad", "num_faces": len(faces),
         "solids": counts["solids"], "shells": counts["shells"], "edges": counts["edges"],
-        "num_curves": len(model.curves), "valid": counts["valid"], "surface_types": types,
+        "num_curves": len(model.curves), "valid": counts["valid"], "surface_types": types, "units": declared,
         "bbox": [lo.tolist(), hi.tolist()] if faces else None,
         "note": "bbox of the control points of the faces' B-spline forms",
         "faces": faces,
@@ -402,6 +513,8 @@ def format_cad_info(info: dict, max_faces: int = 50) -> str:
              + (f", {info['num_curves']} free curves" if info["num_curves"] else ""),
              f"  check       {'valid' if info['valid'] else 'INVALID'} (OpenCASCADE BRepCheck_Analyzer, "
              "after the healing OCC's reader applies to any file)"]
+    if info.get("units"):
+        lines.append(f"  units       the file declares {info['units']}; the numbers below are in millimetres")
     if info.get("bbox"):
         lo, hi = info["bbox"]
         lines.append("  bbox min    " + " ".join(f"{x:.6g}" for x in lo))
@@ -418,19 +531,21 @@ def format_cad_info(info: dict, max_faces: int = 50) -> str:
 
 # ---- any nurbskit result to any file --------------------------------------------------------
 
-def read_objects(path: str | os.PathLike) -> list:
+def read_objects(path: str | os.PathLike, *, units: str = "mm") -> list:
     """The geometry of a nurbskit JSON (one object, ``{"patches": [...]}`` or
     ``{"surfaces": [...]}``, trimmed or not), ``.3dm``, STEP, IGES or BREP file, as a list
     of NURBSCurve / NURBSSurface / TrimmedSurface / NURBSVolume; other NURBS files go
     through :func:`nurbskit.io.read_nurbs`. The ``report.json`` of ``nurbskit shape`` gives
-    its :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface``."""
+    its :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface``.
+    ``units``: STEP and IGES coordinates are converted into it (see :func:`read_cad`); the
+    other files are read as they are."""
     from .._base import check_readable
     from ..nurbs import check_coordinates, read_nurbs
 
     path = check_readable(path)
     ext = path.suffix.lower()
     if ext in CAD_FORMATS:
-        model = read_cad(path)
+        model = read_cad(path, units=units)
         found = [f if f.loops else f.surface for f in model.faces] + list(model.curves)
     elif ext == ".3dm":
         from .rhino import read_3dm_all
@@ -703,7 +818,8 @@ def result_format(path: str | os.PathLike, format: str | None = None) -> str:
 
 
 def write_result(obj, path: str | os.PathLike, format: str | None = None, tolerance: float | None = None,
-                 *, check: bool = True, analytic: bool = True, tolerance_option: str = "tolerance") -> dict:
+                 *, check: bool = True, analytic: bool = True, tolerance_option: str = "tolerance",
+                 units: str = "mm", units_option: str = "units") -> dict:
     """Write a result (surface, trimmed surface, curve, patch list or mesh) in any format.
 
     CAD formats (step, iges, brep) go through :func:`write_cad` (read back and checked;
@@ -714,6 +830,9 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
     off) tessellate surfaces with OCC's mesher to ``tolerance`` (chordal, model units;
     default 1e-3 of the bounding-box diagonal) and are written by trimesh; a tolerance
     whose mesh would not fit in memory is refused first (messages name ``tolerance_option``).
+    ``units``: the unit of the coordinates, declared by STEP, IGES and ``.3dm`` files (the
+    numbers written unchanged; see :data:`UNITS`; messages name ``units_option``); BREP,
+    JSON and the mesh formats hold no unit.
 
     Returns:
         A report: ``format``, ``path``, and per format the check report (CAD), the
@@ -724,16 +843,17 @@ def write_result(obj, path: str | os.PathLike, format: str | None = None, tolera
     path = Path(path)
     fmt = result_format(path, format)
     check_tolerance(tolerance, tolerance_option)
+    check_units(units, units_option)
     objects = _as_list(obj)
     if fmt not in ("step", "iges", "brep"):  # only OCC's formats have swept surfaces: the rest get the NURBS
         objects = [o.to_nurbs() if is_swept(o) else o for o in objects]
     if fmt in ("step", "iges", "brep"):
         report = write_cad(objects if len(objects) > 1 else objects[0], path, format=fmt, check=check,
-                           analytic=analytic)
+                           analytic=analytic, units=units)
     elif fmt == "3dm":
         from .rhino import write_3dm_objects
 
-        report = {"format": "3dm", "left_out": write_3dm_objects(path, objects)}
+        report = {"format": "3dm", "left_out": write_3dm_objects(path, objects, units=units)}
     elif fmt == "json":
         from ..._fs import atomic_open
 
@@ -769,4 +889,4 @@ def write_triangles(vertices: np.ndarray, faces: np.ndarray, path: Path, fmt: st
 __all__ = ["write_cad", "write_shape", "read_cad", "read_shape", "cad_info", "format_cad_info", "cad_format", "read_objects",
            "objects_to_json", "write_result", "result_format", "tessellate_objects", "write_triangles",
            "check_tolerance", "estimate_triangles", "check_tessellation_fits", "MIN_TOLERANCE",
-           "CAD_FORMATS", "RESULT_FORMATS"]
+           "CAD_FORMATS", "RESULT_FORMATS", "UNITS", "check_units"]

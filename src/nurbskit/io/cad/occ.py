@@ -16,8 +16,8 @@ Convention:
     periodic OCC spline with ``periodic="auto"`` (the default); otherwise as the plain
     (unclamped) spline, which is the same geometry.
 
-    Coordinates are written as they are (nurbskit works in millimetres, as STEP files
-    declare); 2-D control points get ``z = 0``. Parameter domains are never rescaled,
+    Coordinates are written as they are (the unit a file declares is the writer's
+    ``units``, :data:`nurbskit.io.cad.exchange.UNITS`); 2-D control points get ``z = 0``. Parameter domains are never rescaled,
     so a surface read back evaluates at the same (u, v) to the same point.
 
 OCP (``cadquery-ocp-novtk``, the ``[cad]`` extra) is imported on first use.

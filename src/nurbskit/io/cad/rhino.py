@@ -4,6 +4,11 @@ surfaces, read and written.
 openNURBS differs from The NURBS Book in two ways, handled here: its knot vectors
 omit the first and last knot (``n + p - 1`` knots, not ``n + p + 1``), and its
 ``Point4d`` control points are homogeneous (``x*w, y*w, z*w, w``).
+
+Units: a file is written with the numbers as they are and declares ``units`` (the unit of
+nurbskit's coordinates, default millimetres; see :data:`nurbskit.io.cad.exchange.UNITS`)
+as its model unit system. Reading takes the numbers as they are, whatever unit the file
+declares.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from ...core.spline import TensorSpline
 from ...core.surface import NURBSSurface
 from ...errors import OptionError
 from .._base import InputError
+from .exchange import UNITS, check_units
 
 
 def _rhino():
@@ -100,11 +106,20 @@ def _spline_of(geo) -> TensorSpline:
                         [t(_full_knots(geo.KnotsU)), t(_full_knots(geo.KnotsV))], t(w))
 
 
-def write_3dm(path: str | os.PathLike, obj: TensorSpline) -> None:
-    """Write one curve or surface (in 2-D or 3-D) to a ``.3dm`` file, atomically."""
+def _new_model(units: str):
+    """An empty rhino3dm model whose model unit system is ``units``."""
     rh = _rhino()
-    path = Path(path)
     model = rh.File3dm()
+    model.Settings.ModelUnitSystem = getattr(rh.UnitSystem, UNITS[units][3])
+    return model
+
+
+def write_3dm(path: str | os.PathLike, obj: TensorSpline, *, units: str = "mm") -> None:
+    """Write one curve or surface (in 2-D or 3-D) to a ``.3dm`` file, atomically; the file
+    declares ``units`` (the coordinates' unit, written unchanged)."""
+    check_units(units)
+    path = Path(path)
+    model = _new_model(units)
     geo = _geometry(path, obj)
     if obj.kind == "curve":
         model.Objects.AddCurve(geo)
@@ -158,15 +173,16 @@ def read_3dm_all(path: str | os.PathLike) -> list[TensorSpline]:
     return [_spline_of(geo) for geo in _read_model(Path(path))]  # the file read once
 
 
-def write_3dm_objects(path: str | os.PathLike, objects) -> list[str]:
+def write_3dm_objects(path: str | os.PathLike, objects, *, units: str = "mm") -> list[str]:
     """Write several curves and surfaces (trimmed surfaces: their surface) to one ``.3dm``
-    file, atomically. Returns what the file cannot hold (``['trimming loops']`` when a
-    trimmed surface was given: rhino3dm offers no way to build trimmed faces)."""
+    file, atomically, declaring ``units`` (the coordinates' unit, written unchanged).
+    Returns what the file cannot hold (``['trimming loops']`` when a trimmed surface was
+    given: rhino3dm offers no way to build trimmed faces)."""
     from ...core.trim import TrimmedSurface
 
-    rh = _rhino()
+    check_units(units)
     path = Path(path)
-    model = rh.File3dm()
+    model = _new_model(units)
     left_out = []
     for obj in objects:
         if isinstance(obj, TrimmedSurface):
