@@ -111,6 +111,11 @@ def test_forward_backward_on_a_batch(mode, arch):
     assert sum(float(g.abs().sum()) for g in grads) > 0
     size_mb = sum(p.numel() for p in model.parameters()) * 4 / 2**20
     assert size_mb <= 2.0  # the shipped file's budget
+    # --stop-weight: the STOP cross-entropies' weight, the rest of the loss as it is
+    with torch.no_grad():
+        heavier, _ = LOSSES[mode](model, data, stop_weight=1.0)
+        ce = sum(v for k, v in parts.items() if k.endswith("_ce"))
+    assert_close(heavier, loss.detach() + 0.9 * ce.detach(), atol=1e-6)
 
 
 def test_sketch_targets_are_the_curves_at_evenly_spaced_parameters():

@@ -86,7 +86,7 @@ def predicted_count(stop_logits: Tensor, minimum: int = 1) -> Tensor:
     return stop.float().argmax(-1) + 1
 
 
-def loss_v(model, data) -> tuple[Tensor, dict]:
+def loss_v(model, data, stop_weight: float = STOP_WEIGHT) -> tuple[Tensor, dict]:
     ink, unit, counts, _ = data
     steps = int(counts.max())
     pred, stops = model(ink, steps)
@@ -95,10 +95,10 @@ def loss_v(model, data) -> tuple[Tensor, dict]:
     mse = _mse(pred, unit[:, 0, :steps], valid)
     ce = _stop_ce(stops, n - 1, valid)
     acc = (predicted_count(stops, MIN_POINTS) == n).float().mean()
-    return mse + STOP_WEIGHT * ce, {"mse": mse, "stop_ce": ce, "point_acc": acc}
+    return mse + stop_weight * ce, {"mse": mse, "stop_ce": ce, "point_acc": acc}
 
 
-def loss_m(model, data) -> tuple[Tensor, dict]:
+def loss_m(model, data, stop_weight: float = STOP_WEIGHT) -> tuple[Tensor, dict]:
     ink, unit, counts, n_curves = data
     k = int(n_curves.max())
     pred, stops = model(ink, k)  # (B, k, P, 2)
@@ -110,7 +110,7 @@ def loss_m(model, data) -> tuple[Tensor, dict]:
     mse = _mse(pred, matched, valid_curve[..., None].expand(pred.shape[:-1]))
     ce = _stop_ce(stops, n_curves - 1, valid_curve)
     acc = (predicted_count(stops) == n_curves).float().mean()
-    return mse + STOP_WEIGHT * ce, {"mse": mse, "stop_ce": ce, "curve_acc": acc}
+    return mse + stop_weight * ce, {"mse": mse, "stop_ce": ce, "curve_acc": acc}
 
 
 def sketch_targets(points: Tensor, counts: Tensor, n: int, degree: int = 3) -> Tensor:
@@ -140,7 +140,7 @@ def _sketch_basis(p_max: int, n: int, degree: int) -> Tensor:
 SKETCH_WEIGHT = 1.0
 
 
-def loss_mv(model, data) -> tuple[Tensor, dict]:
+def loss_mv(model, data, stop_weight: float = STOP_WEIGHT) -> tuple[Tensor, dict]:
     ink, unit, counts, n_curves = data
     k, p = int(n_curves.max()), int(counts.max())
     tokens, codes, curve_stops = model.curve_codes(ink, k)
@@ -159,7 +159,7 @@ def loss_mv(model, data) -> tuple[Tensor, dict]:
     ce_cv = _stop_ce(curve_stops, n_curves - 1, valid_curve)
     right_curves = predicted_count(curve_stops) == n_curves
     right_points = (predicted_count(point_stops, MIN_POINTS) == mcnt).float()
-    loss = mse + STOP_WEIGHT * (ce_pt + ce_cv)
+    loss = mse + stop_weight * (ce_pt + ce_cv)
     logs = {"mse": mse, "point_ce": ce_pt, "curve_ce": ce_cv, "curve_acc": right_curves.float().mean(),
             "point_acc": (right_points * valid_curve).sum() / valid_curve.sum()}
     sketch = model.sketch_points(codes)
@@ -242,6 +242,7 @@ def redrawn_batch_maker(mode: str, size: int = DEFAULT_SIZE, large_share: float 
 
 
 def register_train(subparsers) -> None:
+    from ...cli._options import number_in
     from ...cli.train_command import add_training_options
     from ...learn import TrainConfig
 
@@ -260,6 +261,9 @@ def register_train(subparsers) -> None:
                         "(0, the default: the paper's one attention)")
     p.add_argument("--size", type=int, choices=(32, 64, 128), default=DEFAULT_SIZE,
                    help=f"network input in pixels (default {DEFAULT_SIZE}; the paper's is 128)")
+    p.add_argument("--stop-weight", type=number_in(0, 100, low_open=True), default=STOP_WEIGHT, metavar="W",
+                   help=f"weight of the STOP cross-entropies against the control-point MSE (default {STOP_WEIGHT}, "
+                        "the paper's)")
     add_training_options(p, TrainConfig(steps=3000, batch_size=32, lr=2e-3, checkpoint_every=200))
     p.set_defaults(run=run_train_curves)
 
@@ -275,7 +279,8 @@ def run_train_curves(args) -> int:
     redrawn = args.input == "redrawn"
     meta = {"name": f"curves_{args.mode.lower()}" + ("_redrawn" if redrawn else ""), "mode": args.mode,
             "input": args.input, "size": args.size, "arch": arch,
-            "units": "control points in the unit square (x / W, y / H)"}
+            "units": "control points in the unit square (x / W, y / H)", "stop_weight": args.stop_weight}
     make = (redrawn_batch_maker if redrawn else batch_maker)(args.mode, args.size)
-    run_training(args, lambda: build(args.mode, arch), make, LOSSES[args.mode], config, meta)
+    loss = functools.partial(LOSSES[args.mode], stop_weight=args.stop_weight)
+    run_training(args, lambda: build(args.mode, arch), make, loss, config, meta)
     return 0
