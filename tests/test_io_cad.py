@@ -743,3 +743,31 @@ def test_an_invalid_shape_is_caught_by_the_check_without_healing(tmp_path, fmt):
     if fmt != "brep":  # BREP has no healing on reading
         healed = shapes.check_shape(read_shape(tmp_path / f"bad.{fmt}"))
         assert healed["valid"] and healed["faces"] == 2
+
+
+def test_a_cad_file_exported_to_cad_keeps_its_solids_and_shared_edges(shared_data, tmp_path, capsys):
+    # CAD to CAD goes through OCC's shape as read: through nurbskit's faces (B-splines with
+    # polyline trims, sewn again) the ABC model came back as 3 open shells of 502 edges
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    from nurbskit.cli import main
+
+    step = shared_file(shared_data, "abc/00000050_80d90bfdd2e74e709956122a_step_000.step")
+    original = cad.read_shape(step)
+    assert shapes.count_shapes(original) == {"solids": 3, "shells": 3, "faces": 43, "edges": 106}
+
+    def volume(shape):
+        props = GProp_GProps()
+        BRepGProp.VolumeProperties_s(shape, props)
+        return props.Mass()
+
+    for ext in (".step", ".brep"):
+        assert main(["export", str(step), str(tmp_path / f"abc{ext}")]) == 0
+        back = cad.read_shape(tmp_path / f"abc{ext}")
+        assert shapes.check_shape(back) == {"valid": True, **shapes.count_shapes(original)}
+        assert abs(volume(back) - volume(original)) <= 1e-9 * abs(volume(original))
+    capsys.readouterr()
+    assert main(["export", str(step), str(tmp_path / "abc.iges")]) == 0
+    assert "cannot store solids and shells" in capsys.readouterr().err
+    assert shapes.count_shapes(cad.read_shape(tmp_path / "abc.iges"))["faces"] == 43

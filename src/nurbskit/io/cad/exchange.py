@@ -179,16 +179,20 @@ def _write_brep(shape, path: Path) -> None:
 
 
 def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, check: bool = True,
-                units: str = "mm") -> dict:
+                units: str = "mm", heal_check: bool = False) -> dict:
     """Write an OCC shape as STEP, IGES or BREP, atomically, then read it back and check it.
 
     ``units``: the unit of the shape's coordinates (a key of :data:`UNITS`); STEP and IGES
     files declare it, and the numbers are written unchanged. BREP holds no unit.
+    ``heal_check``: read the file back for the check as any reader would, with OCC's
+    healing (a shape read from a CAD file that is itself valid only healed: the ABC
+    model), rather than as written (:data:`CHECK_READ_FIXES`, the default for nurbskit's
+    own geometry).
 
     Returns:
         The check report: ``format``, ``valid`` (``BRepCheck_Analyzer`` on the shape read
         back), counts of ``solids``, ``shells``, ``faces``, ``edges`` read back, and
-        ``faces_written``.
+        ``faces_written``, ``solids_written``, ``shells_written``.
 
     Raises:
         NurbskitError: OCC could not write the file, or the file read back is invalid or
@@ -204,9 +208,9 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
             _write_brep(shape, tmp)
         else:
             (_write_step if fmt == "step" else _write_iges)(shape, tmp, units)
-        report = {"format": fmt, "faces_written": written["faces"]}
+        report = {"format": fmt, **{f"{k}_written": written[k] for k in ("faces", "solids", "shells")}}
         if check:
-            back = read_shape(tmp, format=fmt, heal=False, units=units)
+            back = read_shape(tmp, format=fmt, heal=heal_check, units=units)
             found = check_shape(back)
             report.update(found)
             if not found["valid"]:
