@@ -467,6 +467,30 @@ def uniform_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
     return torch.where(i < count / 2, a + step * i, b - step * (count - 1 - i))
 
 
+def span_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
+    """``count`` parameters spread evenly over the knot spans of the domain, ends exact.
+
+    Uniform in a parameter ``s`` in which every span of ``[knots[p], knots[n]]`` has the
+    same length: ``s = j / (n - p)`` maps to ``knots[p + j]``, linearly in between
+    (``torch.lerp``, exact at both ends of a span). Each span gets about ``count / (n - p)``
+    samples, however short it is in the parameter (a span holds a piece of the control
+    polygon whatever its length, so this follows the geometry where the knots cluster);
+    uniform knots give the uniform grid. The spans a sample falls in depend on ``count``
+    and ``n - p`` only, so nothing is read back to the host; a repeated knot is a span of
+    length 0 whose samples coincide. Shapes as :func:`uniform_axis`.
+    """
+    k = knots
+    spans = n_ctrl - degree
+    if count == 1:
+        return k[..., degree : degree + 1]
+    s = torch.arange(count, dtype=torch.float64) * (spans / (count - 1))  # on the host: no knots involved
+    j = s.floor().clamp(max=spans - 1)
+    frac = (s - j).to(dtype=k.dtype, device=k.device)
+    j = j.to(dtype=torch.int64, device=k.device) + degree
+    lo, hi = k.index_select(-1, j), k.index_select(-1, j + 1)
+    return torch.lerp(lo, hi, frac)
+
+
 def _kron_channels(matrix: Tensor, D: int) -> Tensor:
     """``B^T kron I_D``: ``(*, R, n)`` -> ``(*, n * D, R * D)``, so that a channel-last
     ``(rows, n * D)`` view times it contracts ``n`` and keeps the channels last."""
