@@ -209,7 +209,7 @@ def test_iges_round_trip_exactly_and_occ_default_precision(tmp_path):
     from OCP.IGESControl import IGESControl_Writer
 
     writer = IGESControl_Writer("MM", 0)
-    writer.AddShape(shapes.to_shape(surfaces, sew_tolerance=None))
+    writer.AddShape(shapes.to_shape(surfaces, sew_tolerance=None, solids=False))  # the faces, as write_cad's IGES
     writer.ComputeModel()
     assert writer.Write(str(tmp_path / "occ.iges"))
     worst = 0.0
@@ -771,3 +771,40 @@ def test_a_cad_file_exported_to_cad_keeps_its_solids_and_shared_edges(shared_dat
     assert main(["export", str(step), str(tmp_path / "abc.iges")]) == 0
     assert "cannot store solids and shells" in capsys.readouterr().err
     assert shapes.count_shapes(cad.read_shape(tmp_path / "abc.iges"))["faces"] == 43
+
+
+def _enclosed_volume(s, per_span: int = 8) -> float:
+    """|(1/3) integral of S . (S_u x S_v) du dv| over the domain (the divergence theorem on
+    a closed surface): Gauss-Legendre with ``per_span`` nodes in every knot span."""
+    nodes, weights = np.polynomial.legendre.leggauss(per_span)
+    axes, ws = [], []
+    for kv, p, n in zip(s.knot_vectors, s.degrees, s.sizes):
+        k = np.unique(kv.numpy()[p : n + 1])
+        a, b = k[:-1, None], k[1:, None]
+        axes.append(((a + b) / 2 + (b - a) / 2 * nodes).reshape(-1))
+        ws.append(((b - a) / 2 * weights).reshape(-1))
+    d = s.evaluate_grid(torch.tensor(axes[0]), torch.tensor(axes[1]), order=1).numpy()
+    triple = np.einsum("ijk,ijk->ij", d[..., 0, 0, :], np.cross(d[..., 1, 0, :], d[..., 0, 1, :]))
+    return abs(float(np.einsum("i,j,ij->", ws[0], ws[1], triple)) / 3.0)
+
+
+def test_a_closed_fit_is_written_as_a_solid(tmp_path):
+    # periodic in v with a pole at each end of u: one face whose seam and poles close it, so
+    # it bounds a solid (it was written as an open face, and as a band slit along the seam)
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    s = nurbskit.load(Path(__file__).parent / "data" / "pole_seam_fit.json")
+    expected = _enclosed_volume(s)
+    for ext in (".step", ".brep"):
+        report = cad.write_cad(s, tmp_path / f"fit{ext}")
+        assert (report["solids"], report["shells"], report["faces"], report["valid"]) == (1, 1, 1, True)
+        props = GProp_GProps()
+        BRepGProp.VolumeProperties_s(cad.read_shape(tmp_path / f"fit{ext}"), props, 1e-10)
+        assert props.Mass() > 0  # oriented outward
+        assert abs(props.Mass() - expected) <= 1e-6 * expected
+    report = cad.write_cad(s, tmp_path / "fit.iges")  # IGES trimmed surfaces: the face alone
+    assert (report["faces"], report["solids"], "left_out" in report) == (1, 0, False)
+    # an open surface stays a face
+    open_patch = random_surface(np.random.default_rng(2), (3, 3))
+    assert (cad.write_cad(open_patch, tmp_path / "open.step")["solids"]) == 0

@@ -128,6 +128,8 @@ def run_export(args) -> int:
     parts = [f"wrote {out} ({report['format']}"]
     if "faces" in report:
         faces = f"{report['faces']} face" + ("" if report["faces"] == 1 else "s")
+        if report.get("solids"):
+            faces += f", {report['solids']} solid" + ("" if report["solids"] == 1 else "s")
         parts.append(f", {faces}, OpenCASCADE check {'passed' if report.get('valid') else 'skipped'}")
     if "triangles" in report:
         parts.append(f", {report['triangles']:,} triangles")

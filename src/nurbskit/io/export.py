@@ -135,15 +135,11 @@ def _cad_to_cad(src: Path, out: Path, fmt: str, check: bool, units: str) -> dict
     """A CAD file to another: OCC's shape as it was read (solids, shells, shared edges,
     analytic faces), not its faces as nurbskit reads them (B-splines with polyline trims,
     sewn again, which lost the solids and most shared edges of the ABC model). The check
-    reads the file back healed, as the input was read; what IGES's trimmed surfaces (144)
-    cannot hold, solids and shells, is reported in ``left_out``."""
+    reads the file back healed, as the input was read."""
     from .cad.exchange import read_shape, write_shape
 
     report = write_shape(read_shape(src, units=units), out, format=fmt, check=check, units=units, heal_check=True)
-    report["path"] = str(out)
-    if fmt == "iges" and (report["solids_written"] or report["shells_written"]):
-        report["left_out"] = ["solids and shells (IGES trimmed surfaces: the faces only)"]
-    return report
+    return {**report, "path": str(out)}
 
 
 __all__ = ["export_file", "read_exportable", "folder_input", "MESH_INPUTS", "FOLDER_FILES"]

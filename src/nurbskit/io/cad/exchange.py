@@ -192,7 +192,8 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
     Returns:
         The check report: ``format``, ``valid`` (``BRepCheck_Analyzer`` on the shape read
         back), counts of ``solids``, ``shells``, ``faces``, ``edges`` read back, and
-        ``faces_written``, ``solids_written``, ``shells_written``.
+        ``faces_written``, ``solids_written``, ``shells_written``; for IGES of a shape with
+        solids or shells, ``left_out`` (:data:`IGES_LEFT_OUT`).
 
     Raises:
         NurbskitError: OCC could not write the file, or the file read back is invalid or
@@ -209,6 +210,8 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
         else:
             (_write_step if fmt == "step" else _write_iges)(shape, tmp, units)
         report = {"format": fmt, **{f"{k}_written": written[k] for k in ("faces", "solids", "shells")}}
+        if fmt == "iges" and (written["solids"] or written["shells"]):
+            report["left_out"] = [IGES_LEFT_OUT]
         if check:
             back = read_shape(tmp, format=fmt, heal=heal_check, units=units)
             found = check_shape(back)
@@ -219,6 +222,10 @@ def write_shape(shape, path: str | os.PathLike, *, format: str | None = None, ch
             if found["faces"] != written["faces"]:
                 raise NurbskitError(f"{path}: wrote {written['faces']} faces but read back {found['faces']}; not written")
     return report
+
+
+#: What an IGES file (faces as trimmed surfaces, entity 144) does not hold of a shape.
+IGES_LEFT_OUT = "solids and shells (IGES trimmed surfaces: the faces only)"
 
 
 def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_tolerance: float | None = 1e-6,
@@ -248,8 +255,18 @@ def write_cad(obj, path: str | os.PathLike, *, format: str | None = None, sew_to
         True
     """
     check_units(units)
-    shape = to_shape(obj, sew_tolerance=sew_tolerance, analytic=analytic)
-    return write_shape(shape, path, format=format, check=check, units=units)
+    fmt = cad_format(path, format)
+    # closed shells as solids, except in IGES, whose trimmed surfaces hold faces only
+    shape = to_shape(obj, sew_tolerance=sew_tolerance, analytic=analytic, solids=fmt != "iges")
+    try:
+        return write_shape(shape, path, format=fmt, check=check, units=units)
+    except NurbskitError:
+        shells = to_shape(obj, sew_tolerance=sew_tolerance, analytic=analytic, solids=False)
+        if count_shapes(shells)["solids"] == count_shapes(shape)["solids"]:
+            raise
+    # a closed shell made a solid that the format's reader does not read back valid, though
+    # the shell alone is (a random doubly periodic net, seen in STEP): the shell as it was
+    return write_shape(shells, path, format=fmt, check=check, units=units)
 
 
 # ---- reading ------------------------------------------------------------------------------

@@ -777,7 +777,8 @@ def _is_mesh(obj) -> bool:
     return hasattr(obj, "vertices") and hasattr(obj, "faces") and not isinstance(obj, (TensorSpline, TrimmedSurface))
 
 
-def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE, analytic: bool = True):
+def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLERANCE, analytic: bool = True,
+             solids: bool = True):
     """An OCC shape for a nurbskit object or a list of them.
 
     NURBSSurface / TrimmedSurface -> face; NURBSCurve -> edge; a mesh (anything with
@@ -785,7 +786,10 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
     :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface`` -> a face on
     OCC's surface of revolution / extrusion (``analytic=False``: on their exact NURBS);
     a list -> a compound whose faces are sewn into shells where neighbouring patches
-    share edges within ``sew_tolerance`` (``None``: no sewing).
+    share edges within ``sew_tolerance`` (``None``: no sewing). With ``solids`` (the
+    default), a shell that closes (every edge shared by two faces, or a seam used twice:
+    a closed fit, periodic with two poles, on its own) bounds a solid, oriented outward
+    (:func:`_solids`).
     """
     from .analytic import is_swept, swept_face
 
@@ -819,6 +823,8 @@ def to_shape(obj, *, sew_tolerance: float | None = 1e-6, tolerance: float = TOLE
                               "surfaces, curves or a mesh")
     if len(faces) > 1 and sew_tolerance is not None:
         faces = [_sew(faces, sew_tolerance)]
+    if solids:
+        faces = [_solids(f) for f in faces]
     shapes = faces + shapes
     if len(shapes) == 1:
         return shapes[0]
@@ -847,6 +853,55 @@ def _sew(faces, tolerance: float):
 
 
 # ---- checking --------------------------------------------------------------------------
+
+def _solids(shape):
+    """``shape`` (a face, a shell, or a compound of shells and faces, as sewing returns)
+    with every closed shell, a face on its own included, made a solid; the rest as it is."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopAbs import TopAbs_COMPOUND, TopAbs_FACE, TopAbs_SHELL
+    from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Iterator, TopoDS_Shell
+
+    kind = shape.ShapeType()
+    if kind == TopAbs_FACE:
+        shell = TopoDS_Shell()
+        BRep_Builder().MakeShell(shell)
+        BRep_Builder().Add(shell, shape)
+        return _solid_of(shell) or shape
+    if kind == TopAbs_SHELL:
+        return _solid_of(TopoDS.Shell(shape)) or shape
+    if kind != TopAbs_COMPOUND:
+        return shape
+    builder = BRep_Builder()
+    out = TopoDS_Compound()
+    builder.MakeCompound(out)
+    children = TopoDS_Iterator(shape)
+    while children.More():
+        builder.Add(out, _solids(children.Value()))
+        children.Next()
+    return out
+
+
+def _solid_of(shell):
+    """The solid a closed shell bounds (oriented outward), or None when the shell is open
+    or OCC finds no valid solid in it (``BRepLib::OrientClosedSolid`` fails, or
+    ``BRepCheck_Analyzer`` refuses the solid: a closed surface that passes through itself,
+    such as a random doubly periodic net, stays a face, as before)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeSolid
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.BRepLib import BRepLib
+
+    if not BRep_Tool.IsClosed_s(shell):
+        return None
+    shell.Closed(True)  # it is: the flag OCC's solid maker reads
+    maker = BRepBuilderAPI_MakeSolid(shell)
+    if not maker.IsDone():
+        return None
+    solid = maker.Solid()
+    if not BRepLib.OrientClosedSolid_s(solid) or not BRepCheck_Analyzer(solid).IsValid():
+        return None
+    return solid
+
 
 def check_shape(shape, *, parallel: bool = True) -> dict:
     """OCC's validity check (``BRepCheck_Analyzer``, with its geometric controls) and
