@@ -723,3 +723,24 @@ def test_clustered_knots_start_in_the_right_basin(power):
     d = (c.evaluate(t.reshape(-1)) - x).norm(dim=-1)
     bound = torch.as_tensor(cKDTree(dense.numpy()).query(x.numpy())[0])
     assert float((d - bound).max()) <= 1e-9
+
+
+def test_the_start_grid_spreads_over_the_non_empty_knot_spans():
+    from nurbskit.core.tensor import span_axis, uniform_axis
+
+    f64 = torch.float64
+    clamped = torch.tensor([0, 0, 0, 0, 1, 2, 3, 4, 4, 4, 4], dtype=f64)
+    assert_close(span_axis(clamped, 3, 7, 33), uniform_axis(clamped, 3, 7, 33), atol=1e-15)
+    # a circle's knots: double knots at the quarters; counted as spans, a third of the
+    # samples sat on them twice over (a revolution surface's mean distance rose 0.6 %)
+    circle = torch.tensor([0, 0, 0, .25, .25, .5, .5, .75, .75, 1, 1, 1], dtype=f64)
+    assert_close(span_axis(circle, 2, 9, 17), torch.linspace(0, 1, 17, dtype=f64), atol=1e-15)
+    # clustered knots: the same number of samples in each span, the ends exact
+    clustered = torch.tensor([0, 0, 0, 0, .01, .02, .5, 1, 1, 1, 1], dtype=f64)
+    t = span_axis(clustered, 3, 7, 13)
+    assert (float(t[0]), float(t[-1])) == (0.0, 1.0)
+    per_span = torch.histc(torch.bucketize(t[:-1], clustered[4:7], right=True).to(f64), bins=4, min=0, max=3)
+    assert per_span.tolist() == [3.0, 3.0, 3.0, 3.0]
+    # per-element knots: each row its own
+    both = span_axis(torch.stack([clustered, 2 * clustered]), 3, 7, 13)
+    assert_close(both, torch.stack([t, 2 * t]), atol=0)

@@ -140,7 +140,7 @@ def show_tab(pg, label: str):
     return pg
 
 
-def _wait(predicate, what: str, timeout: float = 30.0):
+def _wait(predicate, what: str, timeout: float = 60.0):  # generous: a loaded 2-core machine
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         value = predicate()

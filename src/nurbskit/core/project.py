@@ -386,10 +386,12 @@ def _grid_starts(spline, points: Tensor, grid, chunk: int, starts: int = 1,
     call (each element's points in its own grid); ``rows`` index the flat points.
     """
     res = spline._resolution(_resolution(spline, grid), op="project_points' start grid")
-    # evenly over the knot spans, not the parameter: where knots cluster (a fit's knots
-    # moved to the detail) a uniform grid left most of the curve to a few samples, and
-    # points started in the wrong basin (measured: 293 of 2,000 points off by up to 5.6
-    # on a spiral with knots (i / s)^5); (R_a,), or (Bt, R_a) for per-element knots
+    # evenly over the non-empty knot spans, not the parameter: where knots cluster (a fit's
+    # knots moved to the detail) a uniform grid left most of the curve to a few samples,
+    # and points started in the wrong basin (measured: 293 of 2,000 points off by up to
+    # 5.6 on a spiral with knots (i / s)^5); a repeated knot's empty spans get no samples
+    # (counting them put a third of a circle's samples on its double knots, and the mean
+    # distance of a surface of revolution rose 0.6 %); (R_a,), or (Bt, R_a) per element
     axes = [_tp.span_axis(kv.detach(), p, n, r)
             for kv, p, n, r in zip(spline.knot_vectors, spline.degrees, spline.sizes, res)]
     k, dim = spline.para_dim, spline.dim

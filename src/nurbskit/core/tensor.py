@@ -470,25 +470,25 @@ def uniform_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
 def span_axis(knots: Tensor, degree: int, n_ctrl: int, count: int) -> Tensor:
     """``count`` parameters spread evenly over the knot spans of the domain, ends exact.
 
-    Uniform in a parameter ``s`` in which every span of ``[knots[p], knots[n]]`` has the
-    same length: ``s = j / (n - p)`` maps to ``knots[p + j]``, linearly in between
-    (``torch.lerp``, exact at both ends of a span). Each span gets about ``count / (n - p)``
-    samples, however short it is in the parameter (a span holds a piece of the control
-    polygon whatever its length, so this follows the geometry where the knots cluster);
-    uniform knots give the uniform grid. The spans a sample falls in depend on ``count``
-    and ``n - p`` only, so nothing is read back to the host; a repeated knot is a span of
-    length 0 whose samples coincide. Shapes as :func:`uniform_axis`.
+    Uniform in a parameter ``s`` in which every non-empty span of ``[knots[p], knots[n]]``
+    has length 1 (a repeated knot's empty spans get none): span ``j`` covers ``s`` from the
+    number of non-empty spans before it, linearly (``torch.lerp``, exact at both ends of a
+    span). Each span gets about ``count / spans`` samples, however short it is in the
+    parameter (a span holds a piece of the control polygon whatever its length, so this
+    follows the geometry where knots cluster); uniform knots give the uniform grid. The
+    count of non-empty spans stays on the device (a ``searchsorted``), so nothing is read
+    back to the host. Shapes as :func:`uniform_axis`.
     """
-    k = knots
-    spans = n_ctrl - degree
+    k = knots[..., degree : n_ctrl + 1]  # the domain's knots, (..., S + 1)
     if count == 1:
-        return k[..., degree : degree + 1]
-    s = torch.arange(count, dtype=torch.float64) * (spans / (count - 1))  # on the host: no knots involved
-    j = s.floor().clamp(max=spans - 1)
-    frac = (s - j).to(dtype=k.dtype, device=k.device)
-    j = j.to(dtype=torch.int64, device=k.device) + degree
-    lo, hi = k.index_select(-1, j), k.index_select(-1, j + 1)
-    return torch.lerp(lo, hi, frac)
+        return k[..., :1]
+    filled = (k[..., 1:] > k[..., :-1]).to(k.dtype)
+    c = torch.cat([torch.zeros_like(k[..., :1]), filled.cumsum(-1)], -1)  # s at each knot
+    s = torch.linspace(0, 1, count, dtype=k.dtype, device=k.device) * c[..., -1:]
+    # the span of each s: the last knot at or below it (after a repeated knot's empty spans)
+    j = (torch.searchsorted(c.contiguous(), s.contiguous(), right=True) - 1).clamp(0, k.shape[-1] - 2)
+    lo, at = k.gather(-1, j), c.gather(-1, j)
+    return torch.lerp(lo, k.gather(-1, j + 1), s - at)
 
 
 def _kron_channels(matrix: Tensor, D: int) -> Tensor:
