@@ -248,3 +248,22 @@ def test_a_batch_export_items_units(tmp_path):
     assert args.run(args) == 0
     assert _declares_metres(tmp_path / "out" / "s.step")
     _same_numbers(cad.read_cad(tmp_path / "out" / "s.step", units="m").faces[0].surface, s)
+
+
+def test_a_3dm_input_is_converted_from_its_declared_unit_on_export(tmp_path, capsys):
+    # a Rhino model in metres exported to STEP was declared millimetres with its numbers
+    # unchanged: 1000 times too small in CAD software
+    require_extra("rhino3dm")
+    from nurbskit.io.cad.rhino import read_3dm_all
+
+    s = _surface(9, rational=False)
+    cad.write_result(s, tmp_path / "m.3dm", units="m")
+    _same_numbers(read_3dm_all(tmp_path / "m.3dm")[0], s)  # no units: the numbers as they are
+    _same_numbers(read_3dm_all(tmp_path / "m.3dm", units="m")[0], s)
+    _same_numbers(read_3dm_all(tmp_path / "m.3dm", units="mm")[0], s, scale=1000.0, rtol=1e-15)
+    assert main(["export", str(tmp_path / "m.3dm"), str(tmp_path / "mm.step")]) == 0
+    assert not _declares_metres(tmp_path / "mm.step")
+    _same_numbers(cad.read_cad(tmp_path / "mm.step").faces[0].surface, s, scale=1000.0, rtol=1e-15)
+    assert main(["export", str(tmp_path / "m.3dm"), str(tmp_path / "m.step"), "--units", "m"]) == 0
+    assert _declares_metres(tmp_path / "m.step")
+    _same_numbers(cad.read_cad(tmp_path / "m.step", units="m").faces[0].surface, s)

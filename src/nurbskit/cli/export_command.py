@@ -20,8 +20,8 @@ profile (IGES 120 / 122, BREP likewise; ``--bspline``: the exact NURBS instead; 
 formats always get the NURBS). Outputs: by OUTPUT's extension or
 ``--format``. STEP, IGES and BREP need the ``[cad]`` extra (OpenCASCADE), ``.3dm`` too
 (rhino3dm). ``--units`` (default mm) is the unit of the coordinates: STEP, IGES and
-``.3dm`` outputs declare it (the numbers are written unchanged), STEP and IGES inputs are
-converted into it; BREP holds no unit.
+``.3dm`` outputs declare it (the numbers are written unchanged), STEP, IGES and ``.3dm``
+inputs are converted into it; BREP holds no unit.
 
 For the ``fit``, ``patches`` and ``volume`` commands: :func:`add_format_option` adds
 ``--format``, ``--mesh-tolerance`` and ``--units``, and :func:`write_result` writes their
@@ -40,7 +40,7 @@ FORMAT_CHOICES = ("step", "iges", "brep", "3dm", "obj", "ply", "stl", "gltf")
 #: parser imports no I/O module)
 UNIT_CHOICES = ("mm", "cm", "m", "in", "ft", "um")
 UNITS_HELP = ("the length unit of the coordinates (default mm): STEP, IGES and .3dm files declare it, "
-              "the numbers written unchanged; STEP and IGES inputs are converted into it; BREP holds no unit")
+              "the numbers written unchanged; STEP, IGES and .3dm inputs are converted into it; BREP holds no unit")
 
 
 def register(subparsers) -> None:

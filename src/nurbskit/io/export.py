@@ -90,10 +90,9 @@ def export_file(input: str | os.PathLike, output: str | os.PathLike, *, format: 
             B-spline profile; False writes the exact NURBS instead.
         tolerance_option: the name of ``tolerance`` in messages.
         units: the length unit of the coordinates (``mm``, ``cm``, ``m``, ``in``, ``ft``,
-            ``um``; default ``mm``): a STEP or IGES input is converted into it from the unit
-            it declares, and STEP, IGES and ``.3dm`` outputs declare it (the numbers
-            written unchanged). BREP, JSON, meshes and the other inputs hold no unit (a
-            ``.3dm`` input's numbers are taken as they are).
+            ``um``; default ``mm``): a STEP, IGES or ``.3dm`` input is converted into it from
+            the unit it declares, and STEP, IGES and ``.3dm`` outputs declare it (the numbers
+            written unchanged). BREP, JSON, meshes and the other inputs hold no unit.
         units_option: the name of ``units`` in messages.
 
     Returns:

@@ -558,7 +558,8 @@ def read_objects(path: str | os.PathLike, *, units: str = "mm") -> list:
     of NURBSCurve / NURBSSurface / TrimmedSurface / NURBSVolume; other NURBS files go
     through :func:`nurbskit.io.read_nurbs`. The ``report.json`` of ``nurbskit shape`` gives
     its :class:`~nurbskit.io.cad.analytic.RevolvedSurface` / ``ExtrudedSurface``.
-    ``units``: STEP and IGES coordinates are converted into it (see :func:`read_cad`); the
+    ``units``: STEP, IGES and ``.3dm`` coordinates are converted into it from the unit the
+    file declares (see :func:`read_cad`, :func:`~nurbskit.io.cad.rhino.read_3dm_all`); the
     other files are read as they are."""
     from .._base import check_readable
     from ..nurbs import check_coordinates, read_nurbs
@@ -571,7 +572,7 @@ def read_objects(path: str | os.PathLike, *, units: str = "mm") -> list:
     elif ext == ".3dm":
         from .rhino import read_3dm_all
 
-        found = read_3dm_all(path)
+        found = read_3dm_all(path, units=units)
     elif ext == ".json":
         found = _read_json_objects(path)
     else:

@@ -7,8 +7,9 @@ omit the first and last knot (``n + p - 1`` knots, not ``n + p + 1``), and its
 
 Units: a file is written with the numbers as they are and declares ``units`` (the unit of
 nurbskit's coordinates, default millimetres; see :data:`nurbskit.io.cad.exchange.UNITS`)
-as its model unit system. Reading takes the numbers as they are, whatever unit the file
-declares.
+as its model unit system. Reading takes the numbers as they are, or, given ``units``
+(:func:`read_3dm_all`, what ``nurbskit export`` reads), converts them from the unit the
+file declares.
 """
 
 from __future__ import annotations
@@ -67,7 +68,14 @@ def _read_model(path: Path):
     found = [g for g in (_geometry_of(o) for o in model.Objects) if g is not None]
     if not found:
         raise InputError(f"{path}: holds no NURBS curve or surface")
-    return found
+    return found, RHINO_MM_PER_UNIT.get(str(model.Settings.ModelUnitSystem).split(".")[-1])
+
+
+#: Millimetres per unit of the rhino3dm ``UnitSystem`` members a file may declare (the
+#: others, ``None``, ``Unset``, custom units, astronomical ones: numbers read as they are).
+RHINO_MM_PER_UNIT = {"Microns": 1e-3, "Millimeters": 1.0, "Centimeters": 10.0, "Decimeters": 100.0,
+                     "Meters": 1000.0, "Kilometers": 1e6, "Inches": 25.4, "Feet": 304.8, "Yards": 914.4,
+                     "Miles": 1_609_344.0, "Mils": 0.0254, "Microinches": 2.54e-5}
 
 
 def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
@@ -75,7 +83,7 @@ def read_3dm(path: str | os.PathLike, index: int = 0) -> TensorSpline:
     objects are skipped; a Brep counts when it is one untrimmed surface, and any other Brep
     is refused)."""
     path = Path(path)
-    found = _read_model(path)
+    found, _ = _read_model(path)
     if not -len(found) <= index < len(found):
         raise OptionError(f"{path}: index {index} is out of range; the file holds {len(found)} curves/surfaces")
     return _spline_of(found[index])
@@ -168,9 +176,19 @@ def _geometry(path: Path, obj: TensorSpline):
     return geo
 
 
-def read_3dm_all(path: str | os.PathLike) -> list[TensorSpline]:
-    """Every NURBS curve and surface of a ``.3dm`` file, in the file's order."""
-    return [_spline_of(geo) for geo in _read_model(Path(path))]  # the file read once
+def read_3dm_all(path: str | os.PathLike, *, units: str | None = None) -> list[TensorSpline]:
+    """Every NURBS curve and surface of a ``.3dm`` file, in the file's order.
+
+    ``units`` (a key of :data:`~nurbskit.io.cad.exchange.UNITS`): control points converted
+    from the unit the file declares into it, as STEP and IGES inputs are
+    (:data:`RHINO_MM_PER_UNIT`; a file declaring no such unit is read as it is); None
+    (the default): the numbers as they are."""
+    found, file_mm = _read_model(Path(path))  # the file read once
+    splines = [_spline_of(geo) for geo in found]
+    if units is None or file_mm is None or file_mm == UNITS[check_units(units)][2]:
+        return splines
+    scale = file_mm / UNITS[units][2]
+    return [s._replace(control_points=s.control_points * scale) for s in splines]
 
 
 def write_3dm_objects(path: str | os.PathLike, objects, *, units: str = "mm") -> list[str]:
