@@ -432,18 +432,17 @@ def derivatives(
 
 def derivatives_from_homogeneous(
     Pw: Tensor, knot_vectors: Sequence[Tensor], degrees: Sequence[int], params: Tensor, order: int,
-    element: Tensor | None = None, shifted: bool = False,
+    element: Tensor | None = None,
 ) -> Tensor:
     """:func:`derivatives` from homogeneous control points ``Pw (*B, n_1..n_k, dim + 1)``
-    formed once by the caller (iterative solvers evaluate the same spline many times);
-    ``shifted``: ``Pw`` was formed with a shift (``homogeneous(P, w, shift)``).
+    formed once by the caller (iterative solvers evaluate the same spline many times).
 
     With ``element (M,)``, point ``i`` of ``params (M, k)`` lies on element ``element[i]``
     of the flat batch ``Pw (Bt, n_1..n_k, dim + 1)`` -> ``(M, o + 1, ..., dim)`` (see
-    :func:`_local`). (The projection forms ``Pw`` unshifted: its first and second
-    derivatives of the surfaces it meets lose nothing to rounding that it would see.)"""
-    return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order, element),
-                                             len(degrees), shifted)
+    :func:`_local`). ``Pw`` has no shifted weight channel (the module's note on
+    derivatives): the projection, its one user, reads first and second derivatives, where
+    that rounding is far below what it resolves."""
+    return homogeneous_derivatives_to_points(_local(Pw, knot_vectors, degrees, params, order, element), len(degrees))
 
 
 # ---- grids -------------------------------------------------------------------------------------

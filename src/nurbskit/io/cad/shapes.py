@@ -862,16 +862,16 @@ def _solids(shape):
     from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Iterator, TopoDS_Shell
 
     kind = shape.ShapeType()
+    builder = BRep_Builder()
     if kind == TopAbs_FACE:
         shell = TopoDS_Shell()
-        BRep_Builder().MakeShell(shell)
-        BRep_Builder().Add(shell, shape)
+        builder.MakeShell(shell)
+        builder.Add(shell, shape)
         return _solid_of(shell) or shape
     if kind == TopAbs_SHELL:
         return _solid_of(TopoDS.Shell(shape)) or shape
     if kind != TopAbs_COMPOUND:
         return shape
-    builder = BRep_Builder()
     out = TopoDS_Compound()
     builder.MakeCompound(out)
     children = TopoDS_Iterator(shape)
