@@ -21,6 +21,11 @@ L-BFGS reads its scalars in the line search). ``--compare-cpu`` also fits the si
 fitted surfaces (64 x 64 samples of each projected onto the other, over the diagonal; the
 parametrisations may differ by the sign of a principal axis).
 
+On CUDA the loop replays its objective and its warm foot-point refresh as CUDA graphs
+(:mod:`nurbskit._cuda_graph`); each size is also fitted with them turned off
+(``NURBSKIT_CUDA_GRAPHS=0``, every kernel launched from Python) in the same process,
+with the largest distance between the two fitted surfaces (``--no-eager`` skips it).
+
 The optimiser: the loop's L-BFGS (:class:`nurbskit.fit.optim.LBFGS`) against
 ``torch.optim.LBFGS`` configured as the loop used it before (one iteration per step,
 strong Wolfe, history 20), swapped in for ``--peer-optimizer`` sizes in the same process:
@@ -41,6 +46,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import statistics
 import sys
 import time
@@ -115,42 +121,35 @@ def torch_lbfgs():
         loop.make_optimizer = ours
 
 
-@contextlib.contextmanager
-def counting_evaluations():
-    """Counts the loss evaluations of the loop (``stage_loss`` calls): ``[count]``."""
-    from nurbskit.fit import loop
-
-    ours, count = loop.stage_loss, [0]
-
-    def counted(*args, **kwargs):
-        count[0] += 1
-        return ours(*args, **kwargs)
-
-    loop.stage_loss = counted
-    try:
-        yield count
-    finally:
-        loop.stage_loss = ours
-
-
-def fit_once(points, device: str) -> dict:
+def fit_once(points, device: str, graphs: bool = True) -> dict:
+    """One timed fit; ``graphs=False`` runs the loop's steps eagerly (``NURBSKIT_CUDA_GRAPHS=0``)."""
     from nurbskit.fit import fit_surface
 
-    _sync(device)
-    with counting_evaluations() as evaluations:
+    before = os.environ.get("NURBSKIT_CUDA_GRAPHS")
+    os.environ["NURBSKIT_CUDA_GRAPHS"] = "1" if graphs else "0"
+    try:
+        _sync(device)
         t0, c0 = time.perf_counter(), time.process_time()
         result = fit_surface(points.to(device), _config(device))
         _sync(device)
         seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        if before is None:
+            del os.environ["NURBSKIT_CUDA_GRAPHS"]
+        else:
+            os.environ["NURBSKIT_CUDA_GRAPHS"] = before
+    # the loop counts its loss evaluations per iteration (a replayed graph calls no loss function)
+    evaluations = sum(h.get("evaluations", 0) for h in result.history)
     return {
         "result": result,
         "seconds": seconds,
         "cpu_seconds": cpu_seconds,
         "loop_seconds": result.loop_seconds,
         "iterations": result.iterations,
-        "evaluations_per_iteration": evaluations[0] / max(result.iterations, 1),
+        "evaluations_per_iteration": evaluations / max(result.iterations, 1),
         "alternation_rounds": len(result.alternation),
         "s_per_iteration": result.seconds_per_iteration,
+        "cuda_graphs": sorted({h["cuda_graph"] for h in result.history if "cuda_graph" in h}),
     }
 
 
@@ -186,6 +185,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=2,
                         help="rounds of alternating order in which both optimisers are timed (--peer-optimizer sizes)")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--no-eager", action="store_true",
+                        help="on CUDA, do not also time the fit with its steps run eagerly (NURBSKIT_CUDA_GRAPHS=0)")
     parser.add_argument("--out", help="also write the JSON rows here")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -219,6 +220,13 @@ def main(argv=None) -> int:
                "to_surface_mean": _mean_distance(result.surface, points, device)}
         if n in args.count_sizes:
             row.update(count_per_iteration(points, device))
+        if device == "cuda" and not args.no_eager:
+            # the same fit with the loop's steps launched one kernel at a time, in the same
+            # process: what the CUDA graphs buy
+            eager = fit_once(points, device, graphs=False)
+            row["eager_seconds"] = eager["seconds"]
+            row["x_eager"] = eager["seconds"] / row["seconds"]
+            row["max_surface_difference_vs_eager"] = _surface_gap(result.surface, eager["result"].surface, points)
         if args.compare_cpu and device != "cpu" and n <= 20_000:
             cpu = fit_once(points, "cpu")
             row["cpu_fit_seconds"] = cpu["seconds"]
@@ -249,6 +257,9 @@ def main(argv=None) -> int:
         ("ops_per_iteration", "aten ops / iteration"), ("host_reads_per_iteration", "host reads / iteration"),
         ("to_surface_mean", "to-surface mean / diag"), ("max_surface_difference_vs_cpu", "max gap to CPU fit / diag"),
     ]
+    if device == "cuda":
+        columns += [("eager_seconds", "fit s, steps eager"), ("x_eager", "x eager"),
+                    ("max_surface_difference_vs_eager", "max gap to eager fit / diag"), ("cuda_graphs", "CUDA graphs")]
     notes = ("Default pipeline, float64, smooth patch with 0.1 % noise (bench_fit_goals.py); the fit uses a seeded "
              "random subset of at most 20,000 points (max_points). Ops and host reads per iteration: median over the "
              "loop iterations after the first, counted in a second fit (the L-BFGS line search included). "

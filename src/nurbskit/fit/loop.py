@@ -36,6 +36,7 @@ from typing import Callable
 import torch
 
 from .. import losses as L
+from .._cuda_graph import GraphedStep
 from ..errors import OptionError
 from ..core.neighbors import NeighborIndex
 from .config import StageConfig
@@ -88,6 +89,18 @@ class _State:
     foot: Tensor | None = None
     index: NeighborIndex | None = None
     axes: list[Tensor] | None = None  # the sampling grid; the domain's ends stay fixed in a stage
+    warm: GraphedStep | None = None  # the warm foot-point refresh (one CUDA graph on a GPU)
+
+
+def _store(state: _State, name: str, value: Tensor) -> None:
+    """Set ``state.<name>``, in place once it exists: a captured objective (a CUDA graph)
+    reads the tensor it saw when it was captured, so the matching and the foot points
+    must stay the same tensors for the whole stage."""
+    old = getattr(state, name)
+    if old is None or old.shape != value.shape or old.dtype != value.dtype:
+        setattr(state, name, value)
+    else:
+        old.copy_(value)
 
 
 def stage_resolution(stage: StageConfig, target: Target, default: tuple[int, int]) -> tuple[int, int]:
@@ -194,24 +207,33 @@ def refresh_state(
     if not (w.point_to_surface or (w.l2 and stage.rematch_every and not target.supervised)):
         return
     with torch.no_grad():
-        surface = params().detach()
         if w.l2 and stage.rematch_every and not target.supervised:
             if state.matched is None or iteration % stage.rematch_every == 0:
-                flat = surface.sample(resolution).reshape(-1, target.points.shape[-1])
-                state.matched = one_to_one_matching(flat, target.points)
+                flat = params().detach().sample(resolution).reshape(-1, target.points.shape[-1])
+                _store(state, "matched", one_to_one_matching(flat, target.points))
         if w.point_to_surface:
             every = max(stage.reproject_every, 1)
             periodic = (False, params.closed_v)
             if state.foot is None:
-                state.foot = project_points(surface, target.points, periodic=periodic).params
-            elif iteration % every == 0:
-                # Warm start from the last foot points (the surface moves little per step),
-                # also restarted from the nearest grid sample every 20 refreshes (a foot
+                state.foot = project_points(params().detach(), target.points, periodic=periodic).params
+            elif iteration % (20 * every) == 0:
+                # Also restarted from the nearest grid sample every 20 refreshes (a foot
                 # point can jump to another part of the surface); the closer result wins.
-                state.foot = project_points(
-                    surface, target.points, params=state.foot, periodic=periodic, iterations=2,
-                    restart=iteration % (20 * every) == 0, check_every=0, validate=False, second_order=False,
-                ).params
+                _store(state, "foot", project_points(params().detach(), target.points, params=state.foot,
+                                                     periodic=periodic, iterations=2, restart=True, check_every=0,
+                                                     validate=False, second_order=False).params)
+            elif iteration % every == 0:
+                # Warm start from the last foot points (the surface moves little per step):
+                # fixed shapes and no host read, so on a GPU this is one replayed graph.
+                if state.warm is None:
+                    def warm() -> Tensor:
+                        return state.foot.copy_(project_points(
+                            params().detach(), target.points, params=state.foot, periodic=periodic, iterations=2,
+                            check_every=0, validate=False, second_order=False,
+                        ).params)
+
+                    state.warm = GraphedStep(warm, device=state.foot.device)
+                state.warm()
 
 
 def relocate_knots(params: SurfaceParameters, target: Target) -> None:
@@ -293,32 +315,45 @@ def run_stage(
     resolution = stage_resolution(stage, target, default_resolution)
     opt = make_optimizer(stage, tensors)
     state = _State()
+
+    def objective() -> tuple[Tensor, dict[str, Tensor]]:
+        loss, parts = stage_loss(params, stage, target, resolution, state, 0)
+        loss.backward()
+        return loss.detach(), {k: v.detach() for k, v in parts.items()}
+
+    # The loss and its gradient: eager on the first call (it builds the grid axes and the
+    # neighbour index), then on a GPU one replayed CUDA graph, which writes the same loss,
+    # parts and .grad tensors every time (nurbskit._cuda_graph).
+    evaluate = GraphedStep(objective, tensors, device=tensors[0].device)
     for it in range(stage.iters):
         record: dict = {}
         refresh_state(params, stage, target, resolution, state, it)
 
         def closure():
-            opt.zero_grad(set_to_none=True)
-            loss, parts = stage_loss(params, stage, target, resolution, state, it)
-            if not record:
+            loss, parts = evaluate()
+            record["evaluations"] = record.get("evaluations", 0) + 1
+            if "loss" not in record:
                 # The one read of the iteration: the loss and its parts together.
-                values = torch.stack([loss.detach(), *(v.detach() for v in parts.values())]).tolist()
+                values = torch.stack([loss, *parts.values()]).tolist()
                 value, part_values = values[0], dict(zip(parts, values[1:]))
             else:
-                value = float(loss.detach())  # an L-BFGS line search: torch reads it anyway
+                value = float(loss)  # an L-BFGS line search: torch reads it anyway
             if not math.isfinite(value):
-                if stage.optimizer != "lbfgs" or not record:
+                if stage.optimizer != "lbfgs" or "loss" not in record:
                     raise OptionError(
                         f"stage {stage.name}: the surface became NaN or infinite at iteration {it}; "
                         f"lower the learning rate (lr={stage.lr})"
                     )
                 # Inside an L-BFGS line search: a huge loss with zero gradient makes the
-                # search shorten its step instead of failing.
+                # search shorten its step instead of failing (in place: a replayed graph
+                # writes these same gradient tensors).
                 for t in tensors:
-                    t.grad = torch.zeros_like(t)
-                return torch.tensor(1e30, dtype=tensors[0].dtype, device=tensors[0].device)
-            loss.backward()
-            if not record:
+                    if t.grad is None:
+                        t.grad = torch.zeros_like(t)
+                    else:
+                        t.grad.zero_()
+                return torch.full((), 1e30, dtype=tensors[0].dtype, device=tensors[0].device)
+            if "loss" not in record:
                 record.update(loss=value, parts=part_values)
             return loss
 
@@ -332,6 +367,11 @@ def run_stage(
             before = history[-11]["loss"]
             if before - record["loss"] < stage.plateau * abs(before):
                 break
+    # how the stage's evaluations ran: "captured" (replayed graphs) or why they ran eagerly
+    history[-1]["cuda_graph"] = "captured" if evaluate.captured else evaluate.reason
+    evaluate.release()
+    if state.warm is not None:
+        state.warm.release()
     if stage.eliminate_control_points:
         with torch.no_grad():
             surface = params()
