@@ -744,3 +744,17 @@ def test_the_start_grid_spreads_over_the_non_empty_knot_spans():
     # per-element knots: each row its own
     both = span_axis(torch.stack([clustered, 2 * clustered]), 3, 7, 13)
     assert_close(both, torch.stack([t, 2 * t]), atol=0)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA not available: GPU-only check")
+def test_a_large_projection_compacts_its_newton_state_on_cuda_to_the_same_result(monkeypatch):
+    from nurbskit.core import project as pj
+
+    surface = smooth_height_field(seed=4).to("cuda")
+    g = torch.Generator().manual_seed(11)
+    points = (torch.rand(pj._COMPACT_MIN + 5000, 3, generator=g, dtype=F64) * 1.4 - 0.2).cuda()
+    compacted = project_points(surface, points)
+    monkeypatch.setattr(pj, "_COMPACT_MIN", 1 << 62)  # every point through every iteration
+    masked = project_points(surface, points)
+    assert torch.equal(compacted.params, masked.params)
+    assert torch.equal(compacted.distance, masked.distance)
