@@ -25,8 +25,10 @@ On CUDA each grid also times the forward + backward step captured once as a CUDA
 (``torch.cuda.graph``: the whole step, loss and backward included, replayed as one
 launch; PyTorch's "whole-network capture"), ours and NURBS-Diff's alike (a peer that
 cannot be captured is reported with the reason), and checks that the replayed gradients
-equal the eager ones. Eager, both are bound by per-operation overhead at these sizes
-(``benchmarks/README.md``); the graph is what a training loop with fixed shapes can use.
+equal the eager ones; and our forward alone captured the same way, against the two-GEMM
+floor (which is timed eagerly: two launches). Eager, both are bound by per-operation
+overhead at these sizes (``benchmarks/README.md``); the graph is what a training loop
+with fixed shapes can use.
 
 Loop overhead (the batch part): the loop's per-surface cost beyond the arithmetic, timed on a
 2 x 2 grid, and the ceiling ``(arithmetic + 64 x overhead) / arithmetic`` it allows the
@@ -230,6 +232,11 @@ def run_grids(quick: bool, device: str, SurfEval, peer_reason: str) -> list[dict
             }
             if device.startswith("cuda"):
                 row.update(graph_rows("", fwd_bwd, [cp, w], sync, reps))
+                # the forward alone captured too: its kernels without the host's launch cost
+                replay, why = captured(forward, [])
+                if replay is not None:
+                    row["forward_graph_ms"] = timeit(replay, repeats=reps, min_time=0.05, sync=sync) * 1e3
+                    row["x_floor_graph"] = row["forward_graph_ms"] / row["floor_ms"]
             if geomdl_per_point is not None:
                 row["geomdl_ms_est"] = geomdl_per_point * n_points * 1e3
                 row["speedup_vs_geomdl"] = geomdl_per_point * n_points / t_f
@@ -409,7 +416,8 @@ def main() -> None:
                ("nurbsdiff_max_err", "NURBS-Diff max err"), ("speedup_vs_geomdl", "x geomdl"),
                ("speedup_vs_naive_loop", "x naive loop")]
     if args.device == "cuda":
-        columns += [("fwd_bwd_graph_ms", "fwd+bwd ms, CUDA graph"), ("graph_grad_diff", "graph vs eager grad diff"),
+        columns += [("forward_graph_ms", "forward ms, CUDA graph"), ("x_floor_graph", "forward graph / floor"),
+                    ("fwd_bwd_graph_ms", "fwd+bwd ms, CUDA graph"), ("graph_grad_diff", "graph vs eager grad diff"),
                     ("nurbsdiff_fwd_bwd_graph_ms", "NURBS-Diff fwd+bwd ms, CUDA graph"),
                     ("x_nurbsdiff_eager_graph", "NURBS-Diff eager / ours graph"),
                     ("x_nurbsdiff_graph_graph", "NURBS-Diff graph / ours graph"),
