@@ -16,9 +16,9 @@ bumps their version counters itself (what keys the basis cache stays true), and 
 cache is off while capturing: a cached basis would be baked into the graph as a constant,
 though its key tensors (the foot points) change in place between replays.
 
-Where a capture fails (an operation that reads back to the
-host, a copy from host memory) the step runs eagerly from then on and ``reason`` says
-why; nothing else changes. Off the GPU, and with ``NURBSKIT_CUDA_GRAPHS=0`` in the
+Where a capture fails (an operation that reads back to the host, a copy from host
+memory) the step runs eagerly from then on and ``reason`` says why; nothing else
+changes. Off the GPU, and with ``NURBSKIT_CUDA_GRAPHS=0`` in the
 environment, it always runs eagerly.
 """
 
@@ -37,20 +37,11 @@ def graphs_enabled() -> bool:
     return os.environ.get("NURBSKIT_CUDA_GRAPHS", "1") != "0"
 
 
-def _tensors(value: Any):
-    if isinstance(value, Tensor):
-        yield value
-    elif isinstance(value, (tuple, list)):
-        for v in value:
-            yield from _tensors(v)
-    elif isinstance(value, dict):
-        for v in value.values():
-            yield from _tensors(v)
-
-
 def _bump_versions(value: Any) -> None:
+    from .core.tensor import _tensors_in
+
     bump = getattr(torch.autograd.graph, "increment_version", None)
-    for t in _tensors(value):
+    for t in _tensors_in(value):
         if bump is not None:
             bump(t)
         else:  # torch < 2.2

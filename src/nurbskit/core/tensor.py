@@ -160,10 +160,14 @@ class BasisCache:
 
 
 def _tensors_in(value):
+    """The tensors in ``value``: a tensor, or tuples, lists and dicts of them."""
     if isinstance(value, Tensor):
         yield value
     elif isinstance(value, (tuple, list)):
         for v in value:
+            yield from _tensors_in(v)
+    elif isinstance(value, dict):
+        for v in value.values():
             yield from _tensors_in(v)
 
 
