@@ -238,58 +238,83 @@ def _domain(spline, periodic) -> _Domain:
     return _Domain(torch.where(per, -inf, a), torch.where(per, inf, b), a, b - a, per)
 
 
-def _c0_breaks(spline, periodic) -> list[Tensor] | None:
+def _c0_breaks(spline, periodic, elements: int | None = None) -> list[Tensor] | None:
     """Per direction, the interior knots of multiplicity ``>= p`` (where the spline is only
-    C0 in its parameter: a polyline's vertices, a crease), as sorted tensors; None when
-    there are none. Shared knots and directions that do not wrap only. The knots are
-    read on the host (a copy per direction on an accelerator; nothing on the CPU)."""
-    if any(kv.ndim > 1 for kv in spline.knot_vectors):
-        return None
+    C0 in its parameter: a polyline's vertices, a crease) in directions that do not wrap,
+    as a table ``(E, L)``: a sorted row per element, padded with ``inf`` (``E = 1`` where
+    the knots and the periodic directions are shared); None when there are none. The knots
+    are read on the host (a copy per direction on an accelerator; nothing on the CPU)."""
+    k = spline.para_dim
+    if isinstance(periodic, Tensor):
+        wraps = periodic.detach().cpu().numpy().reshape(-1, k)
+    else:
+        wraps = np.asarray(periodic, dtype=bool).reshape(1, k)
     out, found = [], False
     for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
-        k = kv.detach().cpu().numpy()
-        values, counts = np.unique(k[p + 1 : n], return_counts=True)  # the interior knots
-        b = values[(counts >= p) & (values > k[p]) & (values < k[n])] if not periodic[a] else values[:0]
-        found |= b.size > 0
-        out.append(torch.as_tensor(b, dtype=kv.dtype, device=kv.device))
+        knots = kv.detach().cpu().numpy().reshape(-1, kv.shape[-1])  # (1 or Bt, m)
+        rows = []
+        for e in range(max(knots.shape[0], wraps.shape[0])):
+            kk = knots[min(e, knots.shape[0] - 1)]
+            values, counts = np.unique(kk[p + 1 : n], return_counts=True)  # the interior knots
+            inside = (counts >= p) & (values > kk[p]) & (values < kk[n])
+            rows.append(values[:0] if wraps[min(e, wraps.shape[0] - 1), a] else values[inside])
+        table = np.full((len(rows), max(b.size for b in rows)), np.inf)
+        for e, b in enumerate(rows):
+            table[e, : b.size] = b
+        found |= table.shape[1] > 0
+        out.append(torch.as_tensor(table, dtype=kv.dtype, device=kv.device))
     return out if found else None
 
 
-def _pieces(dom: _Domain, t: Tensor, breaks: list[Tensor]) -> _Domain:
+def _pieces(dom: _Domain, t: Tensor, breaks: list[Tensor], element: Tensor | None = None) -> _Domain:
     """Per start ``t (M, k)``, the box of the smooth piece it lies in: between the C0 knots
     ``breaks`` around it (a start on a knot lies in the piece above it), the upper bound one
-    ulp below its knot, so that Newton at that bound evaluates the piece's own span."""
+    ulp below its knot, so that Newton at that bound evaluates the piece's own span. A
+    table of several rows (a batch) gives each start its element's row (``element (M,)``)."""
     M, k = t.shape
     fields = [z.expand(M, k).clone() for z in dom]
     lo, hi = fields[0], fields[1]
     for a, b in enumerate(breaks):
-        if b.numel() == 0:
+        count = b.shape[-1]
+        if count == 0:
             continue
-        i = torch.searchsorted(b, t[:, a].contiguous(), right=True)  # knots at or below t
-        below = b.index_select(0, (i - 1).clamp_min(0))
-        above = b.index_select(0, i.clamp_max(b.numel() - 1))
+        if b.shape[0] == 1:  # shared: one sorted row
+            i = torch.searchsorted(b[0], t[:, a].contiguous(), right=True)  # knots at or below t
+            below = b[0].index_select(0, (i - 1).clamp_min(0))
+            above = b[0].index_select(0, i.clamp_max(count - 1))
+        else:  # each start searches its element's row (padded with inf)
+            rows = b.index_select(0, element)
+            i = torch.searchsorted(rows, t[:, a : a + 1].contiguous(), right=True)
+            below = rows.gather(1, (i - 1).clamp_min(0))[:, 0]
+            above = rows.gather(1, i.clamp_max(count - 1))[:, 0]
+            i = i[:, 0]
         lo[:, a] = torch.where(i > 0, below, lo[:, a])
-        hi[:, a] = torch.where(i < b.numel(), torch.nextafter(above, torch.full_like(above, -math.inf)), hi[:, a])
+        hi[:, a] = torch.where((i < count) & torch.isfinite(above),
+                               torch.nextafter(above, torch.full_like(above, -math.inf)), hi[:, a])
     return _Domain(*fields)
 
 
-def _across_c0_knots(refine, dom: _Domain, breaks: list[Tensor], rows: Tensor, starts: Tensor,
-                     targets: Tensor) -> tuple[Tensor, Tensor]:
+def _across_c0_knots(refine, per_start, breaks: list[Tensor], rows: Tensor, starts: Tensor, targets: Tensor,
+                     element_of) -> tuple[Tensor, Tensor]:
     """Projected Newton on a spline with C0 knots -> ``(rows, found)`` of every start made.
 
     Across a C0 knot the squared distance has a kink, where Newton overshoots, halves its
     step and stops short of the knot. So each start is refined within its smooth piece (the
     knots are the edges of its box, where the active set holds a parameter); a result that
     ends on such an edge starts again in the neighbouring piece, from the knot (twice, for a
-    corner of pieces). The caller keeps each point's closest result."""
+    corner of pieces). The caller keeps each point's closest result. ``element_of(rows)``
+    names each start's element of a batch (None for one spline), ``per_start(element)``
+    gives each start's domain, and ``refine(starts, targets, box, element)`` runs Newton."""
     all_rows, all_found = [rows], []
-    box = _pieces(dom, starts, breaks)
-    found = refine(starts, targets, box)
+    element = element_of(rows)
+    dom = per_start(element)
+    box = _pieces(dom, starts, breaks, element)
+    found = refine(starts, targets, box, element)
     all_found.append(found)
     for _ in range(2):
         again = []
         for a, b in enumerate(breaks):
-            if b.numel() == 0:
+            if b.shape[-1] == 0:
                 continue
             at_lo = (found[:, a] <= box.lo[:, a]) & (box.lo[:, a] > dom.lo[..., a])
             at_hi = (found[:, a] >= box.hi[:, a]) & (box.hi[:, a] < dom.hi[..., a])
@@ -303,8 +328,10 @@ def _across_c0_knots(refine, dom: _Domain, breaks: list[Tensor], rows: Tensor, s
         if not again:
             break
         rows, starts, targets = (torch.cat(z) for z in zip(*again))
-        box = _pieces(dom, starts, breaks)
-        found = refine(starts, targets, box)
+        element = element_of(rows)
+        dom = per_start(element)
+        box = _pieces(dom, starts, breaks, element)
+        found = refine(starts, targets, box, element)
         all_rows.append(rows)
         all_found.append(found)
     return torch.cat(all_rows), torch.cat(all_found)
@@ -643,8 +670,9 @@ def project_points(
     direction that does not wrap: a polyline's vertices, a crease), the squared distance
     has a kink there, across which Newton would overshoot and stop short: a call that
     starts from the grid refines within the smooth pieces (the C0 knots are edges of each
-    start's box) and starts again across the knot a result ends on. A warm call
-    (``params`` without ``restart``) does not, so that it reads nothing back.
+    start's box) and starts again across the knot a result ends on; in a batch each element
+    by its own knots. A warm call (``params`` without ``restart``) does not, so that it
+    reads nothing back.
 
     Args:
         spline: a :class:`NURBSSurface` (or :class:`NURBSCurve`; see
@@ -818,32 +846,38 @@ def _project(
                 starts_t.append(t0)
             rows, starts_t = ((z[0] if len(z) == 1 else torch.cat(z)) for z in (rows, starts_t))
             targets = xd.index_select(0, rows)
-            element = None
-            if elements is not None:  # each start's element, and what differs per element
-                element = torch.div(rows, n, rounding_mode="floor")
-                dom = dom.take(element)
-                tol_move, noise = tol_move.index_select(0, element), noise.index_select(0, element)
+
+            def element_of(rows):  # each start's element of a batch (None: one spline)
+                return None if elements is None else torch.div(rows, n, rounding_mode="floor")
+
+            def per_start(element):  # each start's domain (one spline's is shared)
+                return dom if element is None else dom.take(element)
+
+            element = element_of(rows)
             Pw = _tp.homogeneous(fixed.control_points, fixed.weights).contiguous()
 
             def rows_of(z, i):  # a chunk of a per-start value; shared values pass through
                 return z if z is None or z.ndim == 0 else z[i : i + chunk]
 
-            def refine(starts_t, targets, dom):
+            def refine(starts_t, targets, box, element):
+                # the tolerances of each start's element (one spline's are shared)
+                tm, nz = (z if element is None else z.index_select(0, element) for z in (tol_move, noise))
                 return torch.cat([
                     _newton(fixed, Pw, starts_t[i : i + chunk], targets[i : i + chunk],
-                            dom if dom.lo.ndim < 2 else _Domain(*(z[i : i + chunk] for z in dom)), iterations,
-                            rows_of(tol_move, i), rows_of(noise, i), check_every, second_order, rows_of(element, i))
+                            box if box.lo.ndim < 2 else _Domain(*(z[i : i + chunk] for z in box)), iterations,
+                            rows_of(tm, i), rows_of(nz, i), check_every, second_order, rows_of(element, i))
                     for i in range(0, starts_t.shape[0], chunk)
                 ])
 
             # C0 knots: found on the host, so only where the call reads anyway (a cold start
             # from the grid); a warm call inside a loop reads nothing back
-            breaks = _c0_breaks(fixed, periodic) if elements is None and (warm is None or restart) else None
+            breaks = _c0_breaks(fixed, periodic, elements) if warm is None or restart else None
             if breaks is None:
-                found = refine(starts_t, targets, dom)
+                found = refine(starts_t, targets, per_start(element), element)
             else:  # Newton within the smooth pieces between C0 knots, then across the knots it ends on
-                rows, found = _across_c0_knots(refine, dom, breaks, rows, starts_t, targets)
+                rows, found = _across_c0_knots(refine, per_start, breaks, rows, starts_t, targets, element_of)
                 targets = xd.index_select(0, rows)
+                element = element_of(rows)
             if rows.numel() > total:
                 # several starts for some points: keep the closest result, without a host read
                 C = _tp.derivatives_from_homogeneous(Pw, fixed.knot_vectors, fixed.degrees, found, 0, element)
