@@ -40,7 +40,8 @@ class FitResult:
 
     ``surface`` is in the input's units. ``history`` holds one record per loop
     iteration (``stage``, ``iteration``, ``loss`` and ``parts``, in fit units: the
-    input scaled to a unit bounding-box diagonal); ``alternation`` the mean squared
+    input scaled to a unit bounding-box diagonal; ``evaluations``; each stage's last
+    record ``cuda_graph``, see :func:`~nurbskit.fit.loop.run_stage`); ``alternation`` the mean squared
     distance after each projection + least-squares round.
     """
 

@@ -302,8 +302,10 @@ def run_stage(
 ) -> list[dict]:
     """Run one stage of the generic loop; returns one history record per iteration.
 
-    Each record is ``{"stage", "iteration", "loss", "parts"}`` with the loss *before*
-    that iteration's step. ``params`` is updated in place.
+    Each record is ``{"stage", "iteration", "loss", "parts", "evaluations"}`` with the loss
+    *before* that iteration's step and the loss evaluations the step made; the stage's
+    last record also says how they ran, ``"cuda_graph"``: ``"captured"`` (replayed CUDA
+    graphs) or why they ran eagerly. ``params`` is updated in place.
     """
     if stage.relocate_knots:
         relocate_knots(params, target)
