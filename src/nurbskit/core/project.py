@@ -18,7 +18,8 @@ from a good start point), vectorised over all points and made robust for a box d
    there, and Newton continues on the remaining parameter alone, i.e. on the boundary
    curve. A step that would leave the domain is clamped. A **periodic** direction
    (periodic knot spacing, the last ``p`` control columns repeating the first ``p``) has
-   no edge: the step crosses the seam and the parameter wraps into the domain.
+   no edge: the step crosses the seam and the parameter wraps into the domain (unless
+   it has C0 knots: see :func:`project_points`).
 4. **Descent guard**: where ``H`` is not positive definite the step uses the
    Levenberg-Marquardt matrix ``J J^T + mu I`` instead (always a descent direction);
    a step that does not lower ``f`` is rejected and halved on the next iteration.
@@ -238,42 +239,98 @@ def _domain(spline, periodic) -> _Domain:
     return _Domain(torch.where(per, -inf, a), torch.where(per, inf, b), a, b - a, per)
 
 
-def _c0_breaks(spline, periodic, elements: int | None = None) -> list[Tensor] | None:
-    """Per direction, the interior knots of multiplicity ``>= p`` (where the spline is only
-    C0 in its parameter: a polyline's vertices, a crease) in directions that do not wrap,
-    as a table ``(E, L)``: a sorted row per element, padded with ``inf`` (``E = 1`` where
-    the knots and the periodic directions are shared); None when there are none. The knots
-    are read on the host (a copy per direction on an accelerator; nothing on the CPU)."""
+def _c0_breaks(spline, Pw: Tensor, periodic, elements: int | None = None) -> list[Tensor] | None:
+    """Per direction, the knots where the spline turns a corner: interior knots of
+    multiplicity ``>= p`` (where it is only C0 in its parameter: a polyline's vertices, a
+    crease) across which its tangent along that direction turns (:func:`_turning`; the
+    double knots of a rational circle do not), as a table ``(E, L)``: a sorted row per
+    element, padded with ``inf`` (``E = 1`` where the rows agree); None when there are
+    none. A direction that wraps has its seam (the domain's start) as a break too where
+    the seam turns (a closed polygon) or where it has interior ones: :func:`_pieces` then
+    cuts it into boxes that do not wrap. The knots are read on the host (a copy per
+    direction on an accelerator; nothing on the CPU), and the turns with one read."""
     k = spline.para_dim
     if isinstance(periodic, Tensor):
         wraps = periodic.detach().cpu().numpy().reshape(-1, k)
     else:
         wraps = np.asarray(periodic, dtype=bool).reshape(1, k)
+    knots = [kv.detach().cpu().numpy().reshape(-1, kv.shape[-1]) for kv in spline.knot_vectors]  # (1 or Bt, m)
+    count = elements or 1
     out, found = [], False
-    for a, (kv, p, n) in enumerate(zip(spline.knot_vectors, spline.degrees, spline.sizes)):
-        knots = kv.detach().cpu().numpy().reshape(-1, kv.shape[-1])  # (1 or Bt, m)
-        rows = []
-        for e in range(max(knots.shape[0], wraps.shape[0])):
-            kk = knots[min(e, knots.shape[0] - 1)]
+    for a, (p, n) in enumerate(zip(spline.degrees, spline.sizes)):
+        sides = []  # (element, parameter before the knot, at the knot, is the seam)
+        for e in range(count):
+            kk = knots[a][min(e, knots[a].shape[0] - 1)]
             values, counts = np.unique(kk[p + 1 : n], return_counts=True)  # the interior knots
-            inside = (counts >= p) & (values > kk[p]) & (values < kk[n])
-            rows.append(values[:0] if wraps[min(e, wraps.shape[0] - 1), a] else values[inside])
-        table = np.full((len(rows), max(b.size for b in rows)), np.inf)
-        for e, b in enumerate(rows):
-            table[e, : b.size] = b
+            for v in values[(counts >= p) & (values > kk[p]) & (values < kk[n])]:
+                sides.append((e, np.nextafter(v, -np.inf), v, False))
+            if wraps[min(e, wraps.shape[0] - 1), a] and np.count_nonzero(kk == kk[p]) >= p:
+                sides.append((e, kk[n], kk[p], True))  # the seam: the domain's end meets its start
+        turns = _turning(spline, Pw, a, sides, knots, elements) if sides else []
+        rows = [[] for _ in range(count)]
+        seams = [False] * count
+        for (e, _, v, seam), turn in zip(sides, turns):
+            if turn and seam:
+                seams[e] = True
+            elif turn:
+                rows[e].append(v)
+        for e in range(count):
+            kk = knots[a][min(e, knots[a].shape[0] - 1)]
+            if wraps[min(e, wraps.shape[0] - 1), a] and (rows[e] or seams[e]):
+                rows[e].insert(0, kk[p])  # the seam, the first piece's start
+        if all(r == rows[0] for r in rows):
+            rows = rows[:1]
+        table = np.full((len(rows), max(len(r) for r in rows)), np.inf)
+        for e, r in enumerate(rows):
+            table[e, : len(r)] = r
         found |= table.shape[1] > 0
-        out.append(torch.as_tensor(table, dtype=kv.dtype, device=kv.device))
+        out.append(torch.as_tensor(table, dtype=Pw.dtype, device=Pw.device))
     return out if found else None
+
+
+def _turning(spline, Pw: Tensor, a: int, sides: list, knots: list, elements: int | None) -> list[bool]:
+    """Whether the tangent along direction ``a`` turns across each knot of ``sides``
+    (``(element, parameter before, parameter after, seam)``): the first derivatives on either
+    side, at 9 parameters spread over each other direction, differ in direction by more
+    than rounding (or one vanishes). One evaluation, one host read."""
+    k = spline.para_dim
+    spread = 9
+    before, after, element, side = [], [], [], []
+    for i, (e, lo, hi, _) in enumerate(sides):
+        other = [np.linspace(kk[p], kk[n], spread) for kk, p, n in
+                 ((knots[b][min(e, knots[b].shape[0] - 1)], spline.degrees[b], spline.sizes[b]) for b in range(k))]
+        grid = np.stack(np.meshgrid(*[other[b] if b != a else np.zeros(1) for b in range(k)], indexing="ij"), -1)
+        grid = grid.reshape(-1, k)
+        for t, into in ((lo, before), (hi, after)):
+            g = grid.copy()
+            g[:, a] = t
+            into.append(g)
+        element.append(np.full(grid.shape[0], e))
+        side.append(np.full(grid.shape[0], i))
+    t = torch.as_tensor(np.concatenate(before + after), dtype=Pw.dtype, device=Pw.device)
+    rows = np.concatenate(element)
+    el = None if elements is None else torch.as_tensor(np.concatenate([rows, rows]), device=Pw.device)
+    D = _tp.derivatives_from_homogeneous(Pw, spline.knot_vectors, spline.degrees, t, 1, el)
+    d = D[:, 1] if k == 1 else D.reshape(t.shape[0], 2 ** k, -1)[:, 2 ** (k - 1 - a)]  # d/d(direction a)
+    d = d / d.norm(dim=-1, keepdim=True)  # a vanishing derivative gives NaN: counted as a turn
+    m = d.shape[0] // 2
+    bend = 1.0 - (d[:m] * d[m:]).sum(-1)  # 1 - cos of the angle between the two sides' tangents
+    smooth = (bend <= 100 * torch.finfo(Pw.dtype).eps).cpu().numpy()  # the one host read
+    per = np.ones(len(sides), dtype=bool)
+    np.logical_and.at(per, np.concatenate(side), smooth)
+    return list(~per)
 
 
 def _pieces(dom: _Domain, t: Tensor, breaks: list[Tensor], element: Tensor | None = None) -> _Domain:
     """Per start ``t (M, k)``, the box of the smooth piece it lies in: between the C0 knots
     ``breaks`` around it (a start on a knot lies in the piece above it), the upper bound one
     ulp below its knot, so that Newton at that bound evaluates the piece's own span. A
-    table of several rows (a batch) gives each start its element's row (``element (M,)``)."""
+    table of several rows (a batch) gives each start its element's row (``element (M,)``).
+    A wrapping direction with breaks (its seam is the first) is cut at them: its pieces
+    end at the seam too, and do not wrap (``t`` is folded into ``dom`` already)."""
     M, k = t.shape
     fields = [z.expand(M, k).clone() for z in dom]
-    lo, hi = fields[0], fields[1]
+    lo, hi, start, period, periodic = fields
     for a, b in enumerate(breaks):
         count = b.shape[-1]
         if count == 0:
@@ -282,15 +339,21 @@ def _pieces(dom: _Domain, t: Tensor, breaks: list[Tensor], element: Tensor | Non
             i = torch.searchsorted(b[0], t[:, a].contiguous(), right=True)  # knots at or below t
             below = b[0].index_select(0, (i - 1).clamp_min(0))
             above = b[0].index_select(0, i.clamp_max(count - 1))
+            cut = torch.isfinite(b[0, :1]).expand(M)
         else:  # each start searches its element's row (padded with inf)
             rows = b.index_select(0, element)
             i = torch.searchsorted(rows, t[:, a : a + 1].contiguous(), right=True)
             below = rows.gather(1, (i - 1).clamp_min(0))[:, 0]
             above = rows.gather(1, i.clamp_max(count - 1))[:, 0]
             i = i[:, 0]
-        lo[:, a] = torch.where(i > 0, below, lo[:, a])
+            cut = torch.isfinite(rows[:, 0])
+        wraps = periodic[:, a] & cut  # a wrapping direction cut at its breaks: its seam ends pieces
+        end = torch.where(wraps, start[:, a] + period[:, a], hi[:, a])
+        end = torch.where(wraps, torch.nextafter(end, torch.full_like(end, -math.inf)), end)
+        lo[:, a] = torch.where(i > 0, below, torch.where(wraps, start[:, a], lo[:, a]))
         hi[:, a] = torch.where((i < count) & torch.isfinite(above),
-                               torch.nextafter(above, torch.full_like(above, -math.inf)), hi[:, a])
+                               torch.nextafter(above, torch.full_like(above, -math.inf)), end)
+        periodic[:, a] = periodic[:, a] & ~cut
     return _Domain(*fields)
 
 
@@ -308,6 +371,7 @@ def _across_c0_knots(refine, per_start, breaks: list[Tensor], rows: Tensor, star
     all_rows, all_found = [rows], []
     element = element_of(rows)
     dom = per_start(element)
+    starts = dom.fold(starts)  # into the domain: a wrapping direction's pieces do not wrap
     box = _pieces(dom, starts, breaks, element)
     found = refine(starts, targets, box, element)
     all_found.append(found)
@@ -330,6 +394,7 @@ def _across_c0_knots(refine, per_start, breaks: list[Tensor], rows: Tensor, star
         rows, starts, targets = (torch.cat(z) for z in zip(*again))
         element = element_of(rows)
         dom = per_start(element)
+        starts = dom.fold(starts)  # across a wrapping direction's seam: into the last or the first piece
         box = _pieces(dom, starts, breaks, element)
         found = refine(starts, targets, box, element)
         all_rows.append(rows)
@@ -666,13 +731,16 @@ def project_points(
 ) -> Projection:
     """Closest points on a NURBS surface (or curve) to many points, differentiably.
 
-    Where a spline is only C0 in its parameter (interior knots of multiplicity ``>= p`` in a
-    direction that does not wrap: a polyline's vertices, a crease), the squared distance
-    has a kink there, across which Newton would overshoot and stop short: a call that
-    starts from the grid refines within the smooth pieces (the C0 knots are edges of each
-    start's box) and starts again across the knot a result ends on; in a batch each element
-    by its own knots. A warm call (``params`` without ``restart``) does not, so that it
-    reads nothing back.
+    Where a spline turns a corner at a knot (an interior knot of multiplicity ``>= p``
+    across which the tangent turns: a polyline's vertices, a crease; in a direction that
+    wraps, also a seam that is a corner, as on a closed polygon), the squared distance has
+    a kink there, across which Newton would overshoot and stop short: a call that starts
+    from the grid refines within the smooth pieces (the corners, and the seam of a wrapping
+    direction that has any, are edges of each start's box) and starts again across the
+    knot a result ends on; in a batch each element by its own knots and control points. A
+    warm call (``params`` without ``restart``) does not, so that it reads nothing back.
+    Knots of multiplicity ``>= p`` where the tangent keeps its direction (the double knots
+    of a rational circle) are no corners: the distance is smooth across them.
 
     Args:
         spline: a :class:`NURBSSurface` (or :class:`NURBSCurve`; see
@@ -871,7 +939,7 @@ def _project(
 
             # C0 knots: found on the host, so only where the call reads anyway (a cold start
             # from the grid); a warm call inside a loop reads nothing back
-            breaks = _c0_breaks(fixed, periodic, elements) if warm is None or restart else None
+            breaks = _c0_breaks(fixed, Pw, periodic, elements) if warm is None or restart else None
             if breaks is None:
                 found = refine(starts_t, targets, per_start(element), element)
             else:  # Newton within the smooth pieces between C0 knots, then across the knots it ends on
