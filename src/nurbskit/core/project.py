@@ -248,7 +248,8 @@ def _c0_breaks(spline, Pw: Tensor, periodic, elements: int | None = None) -> lis
     none. A direction that wraps has its seam (the domain's start) as a break too where
     the seam turns (a closed polygon) or where it has interior ones: :func:`_pieces` then
     cuts it into boxes that do not wrap. The knots are read on the host (a copy per
-    direction on an accelerator; nothing on the CPU), and the turns with one read."""
+    direction on an accelerator; nothing on the CPU), and the turns with one read per
+    direction that has knots of multiplicity ``>= p``."""
     k = spline.para_dim
     if isinstance(periodic, Tensor):
         wraps = periodic.detach().cpu().numpy().reshape(-1, k)
